@@ -1,0 +1,1 @@
+//! Criterion benches of actrack; the benches live in `benches/benches/`.

@@ -1,0 +1,7 @@
+//! actrack: track a human arm in video by tracking the action it performs.
+//!
+//! This crate owns I/O and pipelines: configuration (scene, cameras, table), mocap importers, frame
+//! sources, MCAP/CSV writers, evaluation metrics and the `track` pipeline. The numeric kernels are
+//! in `actrack-phmm`, `actrack-render` and `actrack-pf`.
+//!
+//! Not implemented yet: see the project's issues.
