@@ -5,3 +5,8 @@
 //! in `actrack-phmm`, `actrack-render` and `actrack-pf`.
 //!
 //! Not implemented yet: see the project's issues.
+
+pub mod error;
+pub mod frames;
+pub mod scene;
+pub use error::{Error, Result};
