@@ -7,6 +7,4 @@
 //! Not implemented yet: see the project's issues.
 
 pub mod error;
-pub mod frames;
-pub mod scene;
 pub use error::{Error, Result};
