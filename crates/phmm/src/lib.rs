@@ -2,4 +2,15 @@
 //!
 //! This crate is the action model of actrack (SPEC.md §1–§2). It does no I/O.
 //!
-//! Not implemented yet: see the project's issue "Workspace foundation and the parametric HMM crate".
+//! Work in progress: the model type, its validation and accessors are in place; inference and
+//! training follow.
+#![deny(missing_docs)]
+// Temporary while the inference and training modules land (they use the crate-private helpers).
+#![allow(dead_code)]
+
+mod error;
+mod linalg;
+mod model;
+
+pub use error::PhmmError;
+pub use model::{CovarianceKind, EndMode, Phmm};
