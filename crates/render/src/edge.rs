@@ -1,0 +1,600 @@
+//! The edge image G of SPEC §4.1.
+
+use crate::{ImageView, RenderError};
+
+/// Parameters of the edge image (SPEC §4.1).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
+pub struct EdgeParams {
+    /// Threshold τ on the normalised gradient magnitude: values above are set to 1 (default 0.2).
+    pub tau: f32,
+    /// Standard deviation σ_G of the Gaussian smoothing in pixels (default 4; the kernel is
+    /// truncated at ±⌈3σ⌉; 0 disables smoothing).
+    pub sigma: f32,
+    /// Set sub-threshold values to 0 (Deutscher/bodytrack binary map) instead of keeping them.
+    pub binary: bool,
+}
+
+impl Default for EdgeParams {
+    fn default() -> Self {
+        Self {
+            tau: 0.2,
+            sigma: 4.0,
+            binary: false,
+        }
+    }
+}
+
+impl EdgeParams {
+    /// Checks τ ∈ [0, 1] and σ ∈ [0, 100], both finite.
+    pub fn validate(&self) -> Result<(), RenderError> {
+        if !(self.tau.is_finite() && (0.0..=1.0).contains(&self.tau)) {
+            return Err(RenderError::InvalidParameter(format!(
+                "edge threshold tau must be in [0, 1], got {}",
+                self.tau
+            )));
+        }
+        if !(self.sigma.is_finite() && (0.0..=100.0).contains(&self.sigma)) {
+            return Err(RenderError::InvalidParameter(format!(
+                "edge smoothing sigma must be in [0, 100] px, got {}",
+                self.sigma
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// The edge image G ∈ [0, 1] of one view and frame, row-major f32, `G[v·w + u]`.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct EdgeImage {
+    width: u32,
+    height: u32,
+    data: Vec<f32>,
+}
+
+impl EdgeImage {
+    /// Wraps existing values (e.g. a G computed elsewhere, or a constant for tests). Values are
+    /// used as they are; they should lie in [0, 1].
+    pub fn from_vec(width: u32, height: u32, data: Vec<f32>) -> Result<Self, RenderError> {
+        ImageView::grey_f32(&data, width, height)?;
+        Ok(Self {
+            width,
+            height,
+            data,
+        })
+    }
+
+    /// A constant image.
+    pub fn constant(width: u32, height: u32, value: f32) -> Result<Self, RenderError> {
+        Self::from_vec(width, height, vec![value; width as usize * height as usize])
+    }
+
+    /// Width in pixels.
+    pub fn width(&self) -> u32 {
+        self.width
+    }
+
+    /// Height in pixels.
+    pub fn height(&self) -> u32 {
+        self.height
+    }
+
+    /// The values, row-major.
+    pub fn data(&self) -> &[f32] {
+        &self.data
+    }
+
+    /// G at integer pixel (u, v); `None` outside the image.
+    #[inline]
+    pub fn get(&self, u: i64, v: i64) -> Option<f32> {
+        if u < 0 || v < 0 || u >= i64::from(self.width) || v >= i64::from(self.height) {
+            return None;
+        }
+        Some(self.data[v as usize * self.width as usize + u as usize])
+    }
+
+    /// G at the rounded pixel of (u, v) (SPEC §4.3); `None` outside the image.
+    #[inline]
+    pub fn sample_nearest(&self, u: f64, v: f64) -> Option<f32> {
+        let (ui, vi) = (u.round(), v.round());
+        if !(ui >= 0.0 && vi >= 0.0 && ui < f64::from(self.width) && vi < f64::from(self.height)) {
+            return None;
+        }
+        Some(self.data[vi as usize * self.width as usize + ui as usize])
+    }
+
+    /// G bilinearly interpolated at (u, v), with clamping at the border; `None` when the
+    /// rounded pixel is outside the image (the same support as [`EdgeImage::sample_nearest`]).
+    #[inline]
+    pub fn sample_bilinear(&self, u: f64, v: f64) -> Option<f32> {
+        let (ui, vi) = (u.round(), v.round());
+        if !(ui >= 0.0 && vi >= 0.0 && ui < f64::from(self.width) && vi < f64::from(self.height)) {
+            return None;
+        }
+        let (w, h) = (self.width as usize, self.height as usize);
+        let uc = u.clamp(0.0, (w - 1) as f64);
+        let vc = v.clamp(0.0, (h - 1) as f64);
+        let (u0, v0) = (uc.floor() as usize, vc.floor() as usize);
+        let (u1, v1) = ((u0 + 1).min(w - 1), (v0 + 1).min(h - 1));
+        let (a, b) = ((uc - u0 as f64) as f32, (vc - v0 as f64) as f32);
+        let d = &self.data;
+        let top = d[v0 * w + u0] * (1.0 - a) + d[v0 * w + u1] * a;
+        let bot = d[v1 * w + u0] * (1.0 - a) + d[v1 * w + u1] * a;
+        Some(top * (1.0 - b) + bot * b)
+    }
+}
+
+/// Owns the scratch buffers of the edge-image computation, so that computing G for a stream of
+/// frames of one size allocates nothing after the first frame. One workspace per view (or per
+/// thread).
+#[derive(Debug, Default, Clone)]
+pub struct EdgeWorkspace {
+    grey: Vec<f32>,
+    mag: Vec<f32>,
+    tmp: Vec<f32>,
+    sv: Vec<f32>,
+    dv: Vec<f32>,
+    pad: Vec<f32>,
+    kernel: Vec<f32>,
+    kernel_sigma: f32,
+    out: EdgeImage,
+}
+
+/// Largest value of a slice (0 for an empty slice or all values ≤ 0); 8 lanes so that it
+/// vectorises.
+fn max_value(data: &[f32]) -> f32 {
+    let mut lanes = [0f32; 8];
+    let mut chunks = data.chunks_exact(8);
+    for c in &mut chunks {
+        for i in 0..8 {
+            lanes[i] = if c[i] > lanes[i] { c[i] } else { lanes[i] };
+        }
+    }
+    let mut m = chunks
+        .remainder()
+        .iter()
+        .fold(0f32, |m, &v| if v > m { v } else { m });
+    for l in lanes {
+        if l > m {
+            m = l;
+        }
+    }
+    m
+}
+
+impl EdgeWorkspace {
+    /// An empty workspace; buffers grow on first use.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Computes G of SPEC §4.1 for one frame: grey conversion (0.299 R + 0.587 G + 0.114 B),
+    /// Sobel/8, magnitude, normalisation by the maximum, threshold τ (values above set to 1,
+    /// values below kept or, with `binary`, zeroed), separable Gaussian σ_G truncated at ±⌈3σ⌉
+    /// with clamped borders, normalisation by the maximum. A frame without any gradient gives
+    /// G ≡ 0. The result lives in the workspace until the next call (clone it to keep it).
+    pub fn compute(
+        &mut self,
+        frame: ImageView<'_>,
+        params: &EdgeParams,
+    ) -> Result<&EdgeImage, RenderError> {
+        frame.validate()?;
+        params.validate()?;
+        let (w32, h32) = frame.size();
+        let (w, h) = (w32 as usize, h32 as usize);
+        let n = w * h;
+        self.grey.resize(n, 0.0);
+        match frame {
+            ImageView::Rgb8 { data, .. } => {
+                for (g, px) in self.grey.iter_mut().zip(data.chunks_exact(3)) {
+                    *g = 0.299 * f32::from(px[0])
+                        + 0.587 * f32::from(px[1])
+                        + 0.114 * f32::from(px[2]);
+                }
+            }
+            ImageView::Grey8 { data, .. } => {
+                for (g, &p) in self.grey.iter_mut().zip(data) {
+                    *g = f32::from(p);
+                }
+            }
+            ImageView::GreyF32 { data, .. } => {
+                for (g, &p) in self.grey.iter_mut().zip(data) {
+                    *g = if p.is_finite() { p } else { 0.0 };
+                }
+            }
+        }
+        self.sobel(w, h);
+        let max_g = max_value(&self.mag);
+        self.out.width = w32;
+        self.out.height = h32;
+        self.out.data.resize(n, 0.0);
+        if max_g <= 0.0 || !max_g.is_finite() {
+            self.out.data.fill(0.0);
+            return Ok(&self.out);
+        }
+        let inv = 1.0 / max_g;
+        let tau = params.tau;
+        if params.binary {
+            for g in &mut self.mag {
+                *g = if *g * inv > tau { 1.0 } else { 0.0 };
+            }
+        } else {
+            for g in &mut self.mag {
+                let v = *g * inv;
+                *g = if v > tau { 1.0 } else { v };
+            }
+        }
+        if params.sigma > 0.0 {
+            self.make_kernel(params.sigma);
+            self.gauss_rows(w, h);
+            self.gauss_cols(w, h);
+        } else {
+            self.out.data.copy_from_slice(&self.mag);
+        }
+        let max_out = max_value(&self.out.data);
+        if max_out > 0.0 {
+            let inv = 1.0 / max_out;
+            for g in &mut self.out.data {
+                *g *= inv;
+            }
+        } else {
+            self.out.data.fill(0.0);
+        }
+        Ok(&self.out)
+    }
+
+    /// The last result.
+    pub fn edge_image(&self) -> &EdgeImage {
+        &self.out
+    }
+
+    /// Sobel (3×3, /8) gradient magnitude of `grey` into `mag`, borders clamped. Separable:
+    /// per row, the vertical smoothing `a + 2c + b` and the vertical difference `b − a`, then
+    /// horizontal difference / smoothing of those.
+    // `hypot` does not vectorise; |g| ≤ 255·2, so the plain form cannot overflow.
+    #[allow(clippy::imprecise_flops)]
+    fn sobel(&mut self, w: usize, h: usize) {
+        self.mag.resize(w * h, 0.0);
+        self.sv.resize(w, 0.0);
+        self.dv.resize(w, 0.0);
+        for y in 0..h {
+            let a = &self.grey[y.saturating_sub(1) * w..][..w];
+            let c = &self.grey[y * w..][..w];
+            let b = &self.grey[(y + 1).min(h - 1) * w..][..w];
+            for (((sv, dv), (&a, &c)), &b) in self
+                .sv
+                .iter_mut()
+                .zip(self.dv.iter_mut())
+                .zip(a.iter().zip(c))
+                .zip(b)
+            {
+                *sv = a + 2.0 * c + b;
+                *dv = b - a;
+            }
+            let out = &mut self.mag[y * w..][..w];
+            let (sv, dv) = (&self.sv[..w], &self.dv[..w]);
+            let at = |x_l: usize, x: usize, x_r: usize| {
+                let gx = (sv[x_r] - sv[x_l]) * 0.125;
+                let gy = (dv[x_l] + 2.0 * dv[x] + dv[x_r]) * 0.125;
+                (gx * gx + gy * gy).sqrt()
+            };
+            if w >= 3 {
+                for ((o, (sl, sr)), ((dl, dc), dr)) in out[1..w - 1]
+                    .iter_mut()
+                    .zip(sv.iter().zip(&sv[2..]))
+                    .zip(dv.iter().zip(&dv[1..]).zip(&dv[2..]))
+                {
+                    let gx = (sr - sl) * 0.125;
+                    let gy = (dl + 2.0 * dc + dr) * 0.125;
+                    *o = (gx * gx + gy * gy).sqrt();
+                }
+            }
+            out[0] = at(0, 0, 1.min(w - 1));
+            if w > 1 {
+                out[w - 1] = at(w - 2, w - 1, w - 1);
+            }
+        }
+    }
+
+    fn make_kernel(&mut self, sigma: f32) {
+        if self.kernel_sigma.to_bits() == sigma.to_bits() && !self.kernel.is_empty() {
+            return;
+        }
+        let radius = (3.0 * sigma).ceil().max(1.0) as usize;
+        self.kernel.clear();
+        let s2 = 2.0 * f64::from(sigma) * f64::from(sigma);
+        for j in 0..=radius {
+            self.kernel.push((-((j * j) as f64) / s2).exp() as f32);
+        }
+        let sum: f32 = self.kernel[0] + 2.0 * self.kernel[1..].iter().sum::<f32>();
+        for k in &mut self.kernel {
+            *k /= sum;
+        }
+        self.kernel_sigma = sigma;
+    }
+
+    /// Horizontal pass `mag → tmp`, borders clamped via a padded row.
+    fn gauss_rows(&mut self, w: usize, h: usize) {
+        let k = &self.kernel[..];
+        let r = k.len() - 1;
+        self.tmp.resize(w * h, 0.0);
+        self.pad.resize(w + 2 * r, 0.0);
+        for (src, dst) in self.mag.chunks_exact(w).zip(self.tmp.chunks_exact_mut(w)) {
+            let pad = &mut self.pad[..];
+            pad[..r].fill(src[0]);
+            pad[r..r + w].copy_from_slice(src);
+            pad[r + w..].fill(src[w - 1]);
+            let pad = &self.pad[..];
+            let mut x = 0;
+            let mut chunks = dst.chunks_exact_mut(8);
+            for oc in &mut chunks {
+                let mut acc = [0f32; 8];
+                let c: &[f32; 8] = pad[x + r..x + r + 8].try_into().unwrap_or(&[0.0; 8]);
+                for i in 0..8 {
+                    acc[i] = k[0] * c[i];
+                }
+                for (j, &kj) in k.iter().enumerate().skip(1) {
+                    let a: &[f32; 8] = pad[x + r - j..x + r - j + 8]
+                        .try_into()
+                        .unwrap_or(&[0.0; 8]);
+                    let b: &[f32; 8] = pad[x + r + j..x + r + j + 8]
+                        .try_into()
+                        .unwrap_or(&[0.0; 8]);
+                    for i in 0..8 {
+                        acc[i] += kj * (a[i] + b[i]);
+                    }
+                }
+                oc.copy_from_slice(&acc);
+                x += 8;
+            }
+            for o in chunks.into_remainder() {
+                let mut acc = k[0] * pad[x + r];
+                for (j, &kj) in k.iter().enumerate().skip(1) {
+                    acc += kj * (pad[x + r - j] + pad[x + r + j]);
+                }
+                *o = acc;
+                x += 1;
+            }
+        }
+    }
+
+    /// Vertical pass `tmp → out`, borders clamped.
+    fn gauss_cols(&mut self, w: usize, h: usize) {
+        let k = &self.kernel[..];
+        let src = &self.tmp[..];
+        for (y, dst) in self.out.data.chunks_exact_mut(w).enumerate() {
+            let row = |yy: usize| &src[yy * w..yy * w + w];
+            let centre = row(y);
+            let mut x = 0;
+            let mut chunks = dst.chunks_exact_mut(8);
+            for oc in &mut chunks {
+                let mut acc = [0f32; 8];
+                let c: &[f32; 8] = centre[x..x + 8].try_into().unwrap_or(&[0.0; 8]);
+                for i in 0..8 {
+                    acc[i] = k[0] * c[i];
+                }
+                for (j, &kj) in k.iter().enumerate().skip(1) {
+                    let up = row(y.saturating_sub(j));
+                    let dn = row((y + j).min(h - 1));
+                    let a: &[f32; 8] = up[x..x + 8].try_into().unwrap_or(&[0.0; 8]);
+                    let b: &[f32; 8] = dn[x..x + 8].try_into().unwrap_or(&[0.0; 8]);
+                    for i in 0..8 {
+                        acc[i] += kj * (a[i] + b[i]);
+                    }
+                }
+                oc.copy_from_slice(&acc);
+                x += 8;
+            }
+            for o in chunks.into_remainder() {
+                let mut acc = k[0] * centre[x];
+                for (j, &kj) in k.iter().enumerate().skip(1) {
+                    acc += kj * (row(y.saturating_sub(j))[x] + row((y + j).min(h - 1))[x]);
+                }
+                *o = acc;
+                x += 1;
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Straightforward reference of SPEC §4.1 in f64 with per-pixel clamping.
+    #[allow(clippy::imprecise_flops)]
+    fn reference(grey: &[f64], w: usize, h: usize, p: &EdgeParams) -> Vec<f64> {
+        let at = |x: i64, y: i64| {
+            let x = x.clamp(0, w as i64 - 1) as usize;
+            let y = y.clamp(0, h as i64 - 1) as usize;
+            grey[y * w + x]
+        };
+        let mut g = vec![0.0; w * h];
+        for y in 0..h as i64 {
+            for x in 0..w as i64 {
+                let gx = (at(x + 1, y - 1) + 2.0 * at(x + 1, y) + at(x + 1, y + 1)
+                    - at(x - 1, y - 1)
+                    - 2.0 * at(x - 1, y)
+                    - at(x - 1, y + 1))
+                    / 8.0;
+                let gy = (at(x - 1, y + 1) + 2.0 * at(x, y + 1) + at(x + 1, y + 1)
+                    - at(x - 1, y - 1)
+                    - 2.0 * at(x, y - 1)
+                    - at(x + 1, y - 1))
+                    / 8.0;
+                g[y as usize * w + x as usize] = (gx * gx + gy * gy).sqrt();
+            }
+        }
+        let m = g.iter().copied().fold(0.0, f64::max);
+        for v in &mut g {
+            *v /= m;
+            if *v > f64::from(p.tau) {
+                *v = 1.0;
+            } else if p.binary {
+                *v = 0.0;
+            }
+        }
+        let s = f64::from(p.sigma);
+        let r = (3.0 * s).ceil() as i64;
+        let k: Vec<f64> = (-r..=r)
+            .map(|j| (-((j * j) as f64) / (2.0 * s * s)).exp())
+            .collect();
+        let gat = |g: &[f64], x: i64, y: i64| {
+            g[y.clamp(0, h as i64 - 1) as usize * w + x.clamp(0, w as i64 - 1) as usize]
+        };
+        let mut t = vec![0.0; w * h];
+        for y in 0..h as i64 {
+            for x in 0..w as i64 {
+                t[y as usize * w + x as usize] = (-r..=r)
+                    .map(|j| k[(j + r) as usize] * gat(&g, x + j, y))
+                    .sum();
+            }
+        }
+        let mut o = vec![0.0; w * h];
+        for y in 0..h as i64 {
+            for x in 0..w as i64 {
+                o[y as usize * w + x as usize] = (-r..=r)
+                    .map(|j| k[(j + r) as usize] * gat(&t, x, y + j))
+                    .sum();
+            }
+        }
+        let m = o.iter().copied().fold(0.0, f64::max);
+        o.iter().map(|v| v / m).collect()
+    }
+
+    fn test_frame(w: usize, h: usize) -> Vec<u8> {
+        let mut rgb = vec![0u8; w * h * 3];
+        for y in 0..h {
+            for x in 0..w {
+                let i = 3 * (y * w + x);
+                let inside = (x as f64 - 20.0).hypot(y as f64 - 15.0) < 9.0 || (x > 30 && y > 20);
+                let base = if inside { 200u8 } else { 40 };
+                rgb[i] = base;
+                rgb[i + 1] = base.wrapping_add((x * 7 % 13) as u8);
+                rgb[i + 2] = (y * 3 % 50) as u8;
+            }
+        }
+        rgb
+    }
+
+    #[test]
+    fn matches_reference() {
+        for &(w, h) in &[(45usize, 37usize), (8, 5), (1, 1), (3, 40), (17, 2)] {
+            let rgb = test_frame(w, h);
+            let grey: Vec<f64> = rgb
+                .chunks_exact(3)
+                .map(|p| {
+                    0.299 * f64::from(p[0]) + 0.587 * f64::from(p[1]) + 0.114 * f64::from(p[2])
+                })
+                .collect();
+            for params in [
+                EdgeParams::default(),
+                EdgeParams {
+                    tau: 0.35,
+                    sigma: 1.5,
+                    binary: true,
+                },
+                EdgeParams {
+                    tau: 0.1,
+                    sigma: 2.2,
+                    binary: false,
+                },
+            ] {
+                let mut ws = EdgeWorkspace::new();
+                let g = ws
+                    .compute(ImageView::rgb8(&rgb, w as u32, h as u32).unwrap(), &params)
+                    .unwrap()
+                    .clone();
+                let has_gradient = grey.iter().any(|&v| (v - grey[0]).abs() > 1e-9);
+                if !has_gradient {
+                    assert!(g.data().iter().all(|&v| v == 0.0));
+                    continue;
+                }
+                let r = reference(&grey, w, h, &params);
+                let err = g
+                    .data()
+                    .iter()
+                    .zip(&r)
+                    .map(|(&a, &b)| (f64::from(a) - b).abs())
+                    .fold(0.0, f64::max);
+                assert!(err < 1e-4, "{w}×{h} {params:?}: {err}");
+                assert!((max_value(g.data()) - 1.0).abs() < 1e-6);
+            }
+        }
+    }
+
+    #[test]
+    fn constant_frame_gives_zero_and_reuse() {
+        let mut ws = EdgeWorkspace::new();
+        let flat = vec![77u8; 30 * 20];
+        let g = ws.compute(
+            ImageView::grey8(&flat, 30, 20).unwrap(),
+            &EdgeParams::default(),
+        );
+        assert!(g.unwrap().data().iter().all(|&v| v == 0.0));
+        // Different sizes in sequence on one workspace.
+        let rgb = test_frame(50, 40);
+        let g = ws.compute(
+            ImageView::rgb8(&rgb, 50, 40).unwrap(),
+            &EdgeParams::default(),
+        );
+        let g = g.unwrap();
+        assert_eq!((g.width(), g.height()), (50, 40));
+        assert!(g.data().iter().all(|v| (0.0..=1.0).contains(v)));
+        let f: Vec<f32> = vec![f32::NAN; 12];
+        let g = ws.compute(
+            ImageView::grey_f32(&f, 4, 3).unwrap(),
+            &EdgeParams::default(),
+        );
+        assert!(g.unwrap().data().iter().all(|&v| v == 0.0));
+    }
+
+    #[test]
+    fn bad_input() {
+        assert!(ImageView::rgb8(&[], 0, 0).is_err());
+        assert!(ImageView::rgb8(&[0; 10], 2, 2).is_err());
+        assert!(ImageView::grey8(&[0; 4], 0, 4).is_err());
+        let mut ws = EdgeWorkspace::new();
+        let bad = ImageView::Grey8 {
+            data: &[1, 2, 3],
+            width: 2,
+            height: 2,
+        };
+        assert!(ws.compute(bad, &EdgeParams::default()).is_err());
+        let img = [0u8; 4];
+        let v = ImageView::grey8(&img, 2, 2).unwrap();
+        assert!(
+            ws.compute(
+                v,
+                &EdgeParams {
+                    tau: f32::NAN,
+                    ..EdgeParams::default()
+                }
+            )
+            .is_err()
+        );
+        assert!(
+            ws.compute(
+                v,
+                &EdgeParams {
+                    sigma: -1.0,
+                    ..EdgeParams::default()
+                }
+            )
+            .is_err()
+        );
+    }
+
+    #[test]
+    fn sampling() {
+        let g = EdgeImage::from_vec(3, 2, vec![0.0, 0.5, 1.0, 0.25, 0.75, 0.0]).unwrap();
+        assert_eq!(g.sample_nearest(1.4, 0.6), Some(0.75));
+        assert_eq!(g.sample_nearest(-0.6, 0.0), None);
+        assert_eq!(g.sample_nearest(2.49, 1.49), Some(0.0));
+        assert_eq!(g.sample_nearest(f64::NAN, 0.0), None);
+        let b = g.sample_bilinear(0.5, 0.5).unwrap();
+        assert!((b - (0.0 + 0.5 + 0.25 + 0.75) / 4.0).abs() < 1e-6);
+        assert_eq!(g.get(2, 0), Some(1.0));
+        assert_eq!(g.get(3, 0), None);
+    }
+}
