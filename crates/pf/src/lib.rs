@@ -15,6 +15,8 @@
 //!   generate poses (cached Cholesky factors) → weight in log space → [`Estimate`].
 //! * [`resample`] — log-sum-exp weighting and the systematic, stratified, residual and
 //!   multinomial schemes.
+//! * [`synthetic`] — hand-written action models and an oracle observation model for tests,
+//!   benches and demos.
 //! * θ conventions (DESIGN.md): θ is in metres in the actor frame at every public boundary;
 //!   inside, particles store it normalised by the table region's half-extents (corners at ±1),
 //!   the units of σ(k).
@@ -50,6 +52,7 @@ mod observation;
 pub mod resample;
 mod rng;
 mod state;
+pub mod synthetic;
 mod tracker;
 
 pub use config::{

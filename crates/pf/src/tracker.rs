@@ -460,6 +460,205 @@ fn sanitise(l: f64) -> f64 {
 mod tests {
     use super::*;
 
+    use crate::synthetic::{self, SHAPES};
+    use crate::{Resampling, TrackerConfig};
+    use rand::SeedableRng;
+    use rand_pcg::Pcg64Mcg;
+
+    fn config(grammar: Grammar, boundary: Boundary) -> TrackerConfig {
+        TrackerConfig::builder(synthetic::table_region())
+            .grammar(grammar)
+            .boundary(boundary)
+            .resampling(Resampling::Systematic)
+            .build()
+            .unwrap()
+    }
+
+    fn caches(exit: f64, n: usize) -> Vec<ActionCache> {
+        SHAPES
+            .iter()
+            .enumerate()
+            .map(|(a, (_, shape))| {
+                ActionCache::from_phmm(a, &synthetic::action_model(shape, n, exit, 0.015).unwrap())
+                    .unwrap()
+            })
+            .collect()
+    }
+
+    /// Transition draws follow the model's banded row and exit probability.
+    #[test]
+    fn timing_follows_the_transition_row() {
+        let n = 8;
+        let phmm = synthetic::action_model(&SHAPES[0].1, n, 0.2, 0.015).unwrap();
+        let cache = ActionCache::from_phmm(0, &phmm).unwrap();
+        let mut rng = Pcg64Mcg::seed_from_u64(3);
+        let draws = 200_000;
+        for k in [0, 5, n - 2, n - 1] {
+            let mut counts = vec![0.0_f64; n + 1];
+            for _ in 0..draws {
+                match cache.next(k, &mut rng) {
+                    Next::State(j) => counts[j] += 1.0,
+                    Next::Exit => counts[n] += 1.0,
+                }
+            }
+            for j in 0..=n {
+                let p = if j == n {
+                    phmm.exit_prob(k)
+                } else {
+                    phmm.transition(k, j)
+                };
+                let f = counts[j] / f64::from(draws);
+                let tol = 5.0 * (p * (1.0 - p) / f64::from(draws)).sqrt() + 1e-12;
+                assert!((f - p).abs() <= tol, "k={k} j={j}: {f} vs {p}");
+            }
+        }
+    }
+
+    /// On exit the grammar picks the next action; θ is redrawn; k restarts from π (state 0).
+    #[test]
+    fn grammar_on_exit() {
+        let models = caches(1.0, 5);
+        let last = 4;
+        let mut rng = Pcg64Mcg::seed_from_u64(9);
+        let run = |grammar: Grammar, rng: &mut Pcg64Mcg| {
+            let cfg = config(grammar, Boundary::Reflect(1.25));
+            let grammar = match cfg.grammar() {
+                Grammar::Loop => GrammarCache::Loop,
+                Grammar::Uniform => GrammarCache::Uniform,
+                Grammar::Matrix(rows) => GrammarCache::Matrix(
+                    rows.iter()
+                        .flat_map(|r| {
+                            r.iter().scan(0.0, |acc, g| {
+                                *acc += g;
+                                Some(*acc)
+                            })
+                        })
+                        .collect(),
+                ),
+            };
+            let kernel = Kernel {
+                models: &models,
+                grammar: &grammar,
+                config: &cfg,
+                frame: 1,
+            };
+            let mut counts = [0_usize; 3];
+            let mut thetas = Vec::new();
+            for _ in 0..3000 {
+                let mut s = ActionState {
+                    action: 1,
+                    theta: [0.9, 0.9],
+                    k: last,
+                };
+                kernel.propagate(&mut s, rng);
+                assert_eq!(s.k, 0, "re-entry at the first state");
+                counts[s.action] += 1;
+                thetas.push(s.theta);
+            }
+            (counts, thetas)
+        };
+        let (c, thetas) = run(Grammar::Loop, &mut rng);
+        assert_eq!(c, [0, 3000, 0]);
+        // θ ~ U(R) (+ diffusion): mean near 0, spread over the region.
+        let mu: f64 = thetas.iter().map(|t| t[0]).sum::<f64>() / 3000.0;
+        assert!(mu.abs() < 0.06, "θ not redrawn uniformly: mean {mu}");
+        assert!(thetas.iter().any(|t| t[0] < -0.8) && thetas.iter().any(|t| t[1] < -0.8));
+        let m = vec![
+            vec![1.0, 0.0, 0.0],
+            vec![0.0, 0.0, 1.0],
+            vec![0.0, 1.0, 0.0],
+        ];
+        let (c, _) = run(Grammar::Matrix(m), &mut rng);
+        assert_eq!(c, [0, 0, 3000]);
+        let (c, _) = run(Grammar::Uniform, &mut rng);
+        for x in c {
+            assert!((900..1100).contains(&x), "uniform switching: {c:?}");
+        }
+    }
+
+    /// A model without exit (EndMode::None) never leaves its action; at the absorbing last state
+    /// θ diffuses with σ(N) = 0.4/16 (cooling evaluated at the post-transition k').
+    #[test]
+    fn no_exit_and_cooling_at_the_last_state() {
+        let n = 6;
+        let models = caches(0.0, n);
+        let cfg = config(Grammar::Uniform, Boundary::None);
+        let grammar = GrammarCache::Uniform;
+        let kernel = Kernel {
+            models: &models,
+            grammar: &grammar,
+            config: &cfg,
+            frame: 1,
+        };
+        let mut rng = Pcg64Mcg::seed_from_u64(11);
+        let draws = 40_000;
+        let mut s2 = [0.0; 2];
+        for _ in 0..draws {
+            let mut s = ActionState {
+                action: 2,
+                theta: [0.0, 0.0],
+                k: n - 1,
+            };
+            kernel.propagate(&mut s, &mut rng);
+            assert_eq!((s.action, s.k), (2, n - 1));
+            s2[0] += s.theta[0] * s.theta[0];
+            s2[1] += s.theta[1] * s.theta[1];
+        }
+        for v in s2 {
+            let sd = (v / f64::from(draws)).sqrt();
+            assert!((sd - 0.025).abs() < 0.025 * 0.02, "σ(N) = {sd}");
+        }
+        // From state 0 the next state is 0..3, so the spread is a mixture of σ(1..4).
+        let mut s = ActionState {
+            action: 0,
+            theta: [0.0, 0.0],
+            k: 0,
+        };
+        let before = s;
+        kernel.propagate(&mut s, &mut rng);
+        assert!(s.k <= 3 && s.action == before.action);
+    }
+
+    /// Generated poses have the model's mean μ_k(θ) (θ converted to metres) and covariance.
+    #[test]
+    fn pose_samples_match_the_model() {
+        let mut shape = SHAPES[2].1;
+        shape.lift = 0.07;
+        let phmm = synthetic::action_model(&shape, 10, 0.2, 0.02).unwrap();
+        let cache = ActionCache::from_phmm(0, &phmm).unwrap();
+        let region = synthetic::table_region();
+        let u = [0.6, -0.3];
+        let theta_m = region.to_metres(u);
+        let k = 7;
+        let mu = phmm.mean(k, &theta_m);
+        let mut rng = Pcg64Mcg::seed_from_u64(5);
+        let draws = 50_000;
+        let mut sum = [0.0; 9];
+        let mut sq = [0.0; 9];
+        let mut x = [0.0; 9];
+        for _ in 0..draws {
+            cache.sample(k, theta_m, &mut rng, &mut x);
+            for r in 0..9 {
+                sum[r] += x[r];
+                sq[r] += (x[r] - mu[r]) * (x[r] - mu[r]);
+            }
+        }
+        cache.mean(k, theta_m, &mut x);
+        for r in 0..9 {
+            assert!((x[r] - mu[r]).abs() < 1e-12);
+            let mean = sum[r] / f64::from(draws);
+            assert!(
+                (mean - mu[r]).abs() < 5.0 * 0.02 / f64::from(draws).sqrt(),
+                "coord {r}"
+            );
+            let var = sq[r] / f64::from(draws);
+            assert!(
+                (var / phmm.covariance(k)[(r, r)] - 1.0).abs() < 0.03,
+                "coord {r}: {var}"
+            );
+        }
+    }
+
     #[test]
     fn reflection_folds_into_the_band() {
         let b = 1.25;
