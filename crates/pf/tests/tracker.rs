@@ -1,6 +1,9 @@
 //! Behaviour of the whole tracker: construction errors, determinism across thread counts,
 //! degenerate frames, estimate invariants and the configuration options.
 
+// Test helpers unwrap freely; exact float comparisons are intended where used.
+#![allow(clippy::unwrap_used, clippy::float_cmp)]
+
 use actrack_pf::synthetic::{self, OracleObservation};
 use actrack_pf::{
     ConstantObservation, Estimate, Grammar, KInit, ObservationModel, PfError, PoseSampling,
@@ -223,9 +226,7 @@ fn degenerate_frames_do_not_corrupt_the_filter() {
             "{when:?}: {:?}",
             last.action_posterior
         );
-        assert!(
-            ((last.theta_mean[0] - 0.1).powi(2) + (last.theta_mean[1] - 0.5).powi(2)).sqrt() < 0.03
-        );
+        assert!((last.theta_mean[0] - 0.1).hypot(last.theta_mean[1] - 0.5) < 0.03);
     }
 }
 
@@ -299,7 +300,7 @@ fn estimates_are_consistent_for_all_options() {
             .unwrap(),
     ];
     for c in variants {
-        let label = format!("{:?}", c);
+        let label = format!("{c:?}");
         let mut t = Tracker::new(&m, names.clone(), c.clone()).unwrap();
         let est = run(&mut t, &seq);
         for (f, e) in est.iter().enumerate() {
