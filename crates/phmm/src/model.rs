@@ -80,6 +80,8 @@ pub struct Phmm {
     pub(crate) chol_packed: Vec<Vec<f64>>,
     pub(crate) chol_inv_diag: Vec<Vec<f64>>,
     pub(crate) log_norm: Vec<f64>,
+    /// Distinct training θ (internal units), the starting points of multi-start θ estimation.
+    pub(crate) training_thetas: Vec<Vec<f64>>,
 }
 
 /// The serialised form: plain nested arrays, easy to read from any language.
@@ -103,6 +105,9 @@ struct PhmmRepr {
     theta_scale: Vec<f64>,
     /// Σ_i row-major d × d.
     covariances: Vec<Vec<f64>>,
+    /// Training θ values (internal units), for multi-start θ estimation.
+    #[serde(default)]
+    training_thetas: Vec<Vec<f64>>,
 }
 
 impl From<Phmm> for PhmmRepr {
@@ -123,6 +128,7 @@ impl From<Phmm> for PhmmRepr {
             theta_center: m.theta_center.clone(),
             theta_scale: m.theta_scale.clone(),
             covariances: m.covariances.iter().map(row_major).collect(),
+            training_thetas: m.training_thetas.clone(),
         }
     }
 }
@@ -173,6 +179,14 @@ impl TryFrom<PhmmRepr> for Phmm {
             weights.push(DMatrix::from_row_slice(d, p, &r.weights[i]));
             covs.push(DMatrix::from_row_slice(d, d, &r.covariances[i]));
         }
+        if r.training_thetas
+            .iter()
+            .any(|t| t.len() != p || t.iter().any(|v| !v.is_finite()))
+        {
+            return bad(format!(
+                "training_thetas must be finite vectors of length {p}"
+            ));
+        }
         let trans: Vec<f64> = r.transitions_banded.into_iter().flatten().collect();
         Phmm::assemble(
             j,
@@ -187,6 +201,7 @@ impl TryFrom<PhmmRepr> for Phmm {
             r.theta_scale,
             covs,
         )
+        .map(|m| m.with_training_thetas(r.training_thetas))
     }
 }
 
@@ -473,7 +488,16 @@ impl Phmm {
             chol_packed,
             chol_inv_diag,
             log_norm,
+            training_thetas: Vec::new(),
         })
+    }
+
+    /// Attach the training θ (internal units), deduplicated.
+    pub(crate) fn with_training_thetas(mut self, mut thetas: Vec<Vec<f64>>) -> Phmm {
+        thetas.sort_by(|a, b| a.partial_cmp(b).unwrap_or(std::cmp::Ordering::Equal));
+        thetas.dedup();
+        self.training_thetas = thetas;
+        self
     }
 
     /// Number of states N.
