@@ -854,16 +854,30 @@ fn omega_of(theta: &[f64]) -> Vec<f64> {
 }
 
 /// Solve `Z (G + R) = B` with the ridge R = diag(λ_W, …, λ_W, 0) on W only (SPEC §2.4), by
-/// Cholesky. `None` if the system is singular even with the ridge.
+/// Cholesky; R = 0 when G is well conditioned. `None` if the system is singular even with the ridge.
 pub(crate) fn solve_normal_equations(g: &DMatrix<f64>, b: &DMatrix<f64>) -> Option<DMatrix<f64>> {
     let q = g.nrows();
-    let mut gr = g.clone();
-    let lam = 1e-6 * g.trace() / q as f64;
-    for k in 0..q - 1 {
-        gr[(k, k)] += lam;
-    }
+    // λ_W = 0 when G is well conditioned (the pivot ratio of its Cholesky factor is a cheap
+    // proxy), else λ_W = 1e-6·tr(G)/(p+1) on the W block only.
+    let well_conditioned = cholesky_lower(g).filter(|l| {
+        let (mut lo, mut hi) = (f64::INFINITY, 0.0f64);
+        for k in 0..q {
+            lo = lo.min(l[(k, k)]);
+            hi = hi.max(l[(k, k)]);
+        }
+        lo * lo >= 1e-8 * hi * hi
+    });
     // (G+R) Zᵀ = Bᵀ, G symmetric.
-    let l = cholesky_lower(&gr)?;
+    let l = if let Some(l) = well_conditioned {
+        l
+    } else {
+        let mut gr = g.clone();
+        let lam = 1e-6 * g.trace() / q as f64;
+        for k in 0..q - 1 {
+            gr[(k, k)] += lam;
+        }
+        cholesky_lower(&gr)?
+    };
     let mut zt = b.transpose();
     for c in 0..zt.ncols() {
         let mut col: Vec<f64> = zt.column(c).iter().copied().collect();
