@@ -406,9 +406,21 @@ impl Workspace {
             self.gamma.fill(0.0);
             return log_p;
         }
-        for k in 0..t_len * n {
-            let g = (self.alpha[k] + self.beta[k] - log_p).exp();
-            self.gamma[k] = if g.is_nan() { 0.0 } else { g };
+        for t in 0..t_len {
+            let row = &mut self.gamma[t * n..(t + 1) * n];
+            let mut tot = 0.0;
+            for i in 0..n {
+                let g = (self.alpha[t * n + i] + self.beta[t * n + i] - log_p).exp();
+                row[i] = if g.is_nan() { 0.0 } else { g };
+                tot += row[i];
+            }
+            // Σ_i γ_t(i) = 1 exactly in theory; with |log P| ~ 1e9 the subtraction above carries
+            // an absolute error of ~ulp(log P), so renormalise each frame.
+            if tot > 0.0 {
+                for v in row.iter_mut() {
+                    *v /= tot;
+                }
+            }
         }
         if want_xi {
             for t in 0..t_len - 1 {

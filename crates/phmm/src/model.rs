@@ -189,6 +189,7 @@ impl TryFrom<PhmmRepr> for Phmm {
         }
         let trans: Vec<f64> = r.transitions_banded.into_iter().flatten().collect();
         Phmm::assemble(
+            false,
             j,
             r.end_mode,
             r.covariance_kind,
@@ -289,6 +290,7 @@ impl Phmm {
         }
         let p = weights.first().map_or(0, DMatrix::ncols);
         Phmm::assemble(
+            true,
             max_jump,
             end_mode,
             if covariances.iter().all(is_diagonal) {
@@ -308,9 +310,12 @@ impl Phmm {
     }
 
     /// Validate internal parameters and compute the derived caches. Used by every constructor
-    /// (explicit parameters, training, deserialisation).
+    /// (explicit parameters, training, deserialisation). With `renormalise`, π and the rows are
+    /// rescaled to sum to exactly one (explicit parameters); without, values are kept bit for
+    /// bit (so a serde round trip is exact).
     #[allow(clippy::needless_pass_by_value)]
     pub(crate) fn assemble(
+        renormalise: bool,
         max_jump: usize,
         end_mode: EndMode,
         covariance_kind: CovarianceKind,
@@ -369,8 +374,10 @@ impl Phmm {
         if (s - 1.0).abs() > ROW_SUM_TOL {
             return bad(format!("start probabilities sum to {s}, not 1"));
         }
-        for x in &mut start {
-            *x /= s;
+        if renormalise {
+            for x in &mut start {
+                *x /= s;
+            }
         }
         // A and a_E
         for i in 0..n {
@@ -414,10 +421,12 @@ impl Phmm {
                     "row {i}: Σ_j a_ij + a_iE = {row}, must be 1 (transitions plus exit probability)"
                 ));
             }
-            for x in &mut trans[i * w..(i + 1) * w] {
-                *x /= row;
+            if renormalise {
+                for x in &mut trans[i * w..(i + 1) * w] {
+                    *x /= row;
+                }
+                exit[i] /= row;
             }
-            exit[i] /= row;
         }
         // Emissions
         let mut cholesky = Vec::with_capacity(n);

@@ -529,6 +529,7 @@ impl ValidPhmmParams {
         let mean_bias = z.iter().map(|zi| zi.column(p).into_owned()).collect();
         let weights = z.iter().map(|zi| zi.columns(0, p).into_owned()).collect();
         let model = Phmm::assemble(
+            true,
             jmax,
             prm.end_mode,
             prm.covariance,
@@ -754,6 +755,7 @@ impl ValidPhmmParams {
             covs[i] = c;
         }
         let model = Phmm::assemble(
+            false,
             old.j,
             old.end_mode,
             old.covariance_kind,

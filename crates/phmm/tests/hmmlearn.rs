@@ -2,6 +2,8 @@
 //! by `scripts/make-hmmlearn-fixtures`; the models are left-right with zeros outside the band, so
 //! they are our `EndMode::None` topology (no exit modelling, last row a_NN = 1).
 
+#![allow(clippy::unwrap_used, clippy::float_cmp)] // helpers outside #[test] fns; exact zeros are the point
+
 use actrack_phmm::{EndMode, Phmm, PhmmParams};
 use nalgebra::{DMatrix, DVector};
 use serde_json::Value;
