@@ -434,6 +434,12 @@ pub fn project_parts(camera: &Camera, geometry: &ArmGeometry, pose: &[f64; 9]) -
     out
 }
 
+/// The raster polygon of a part (pixel coordinates, the same vertices as the silhouette),
+/// appended to `out`.
+pub(crate) fn part_polygon(part: &Part2, out: &mut Vec<[f64; 2]>) {
+    Prepared::new(part).walk_outline(1.0, true, |x| out.push([x.x, x.y]));
+}
+
 /// Analytic contour: calls `visit(u, v)` for points every `step` pixels along each part's
 /// outline that are not more than half a pixel inside another part and whose rounded pixel is
 /// inside the `width × height` image.

@@ -73,3 +73,6 @@ pub use likelihood::{LikelihoodModel, SamplingMode};
 /// An arm pose as it crosses crate boundaries: (p shoulder xyz, q elbow xyz, r fingertip xyz),
 /// metres, world frame.
 pub type Pose = [f64; 9];
+
+#[cfg(test)]
+mod tests;
