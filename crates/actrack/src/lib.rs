@@ -7,4 +7,8 @@
 //! Not implemented yet: see the project's issues.
 
 pub mod error;
+pub mod manifest;
+pub mod mocap;
+pub mod model;
+pub mod train;
 pub use error::{Error, Result};

@@ -1,0 +1,421 @@
+//! Training action models from mocap trials, and recognising actions of whole or partial trials
+//! without video (Wilson & Bobick: per action, the likelihood at its EM-estimated θ).
+
+use std::path::Path;
+
+use actrack_phmm::{EndMode, Phmm, PhmmParams, ThetaEmOptions};
+use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::error::{Error, Result};
+use crate::manifest::{Manifest, ManifestTrial, TrainOptions};
+use crate::mocap::trial::{Importer, Preprocessing, Trial, median};
+use crate::model::{Action, ActionModel, ArmLengths, Provenance, THETA_FRAME, now_iso8601};
+
+/// Progress of a long operation, reported to a callback (the CLI draws a bar from it).
+#[derive(Clone, Debug)]
+pub enum Progress {
+    /// `done` of `total` trials imported.
+    Imported {
+        /// Trials done.
+        done: usize,
+        /// Trials in all.
+        total: usize,
+    },
+    /// Fitting action `action` (index `index` of `total`).
+    Fitting {
+        /// The action.
+        action: String,
+        /// Its index.
+        index: usize,
+        /// Number of actions.
+        total: usize,
+    },
+}
+
+/// A trial with its label, as trained on or classified.
+#[derive(Clone, Debug)]
+pub struct LabelledTrial {
+    /// Action label.
+    pub action: String,
+    /// The prepared trial.
+    pub trial: Trial,
+}
+
+/// Imports every trial a manifest lists (in parallel where cores allow), with the manifest's
+/// preprocessing or `preprocessing` when given.
+pub fn import_manifest(
+    manifest: &Manifest,
+    preprocessing: Option<&Preprocessing>,
+    progress: &(dyn Fn(Progress) + Sync),
+) -> Result<Vec<LabelledTrial>> {
+    let importer = Importer::new(preprocessing.unwrap_or(&manifest.preprocessing).clone())?;
+    import_trials(&importer, &manifest.trials, progress)
+}
+
+/// Imports trials with an importer (in parallel where cores allow).
+pub fn import_trials(
+    importer: &Importer,
+    trials: &[ManifestTrial],
+    progress: &(dyn Fn(Progress) + Sync),
+) -> Result<Vec<LabelledTrial>> {
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    let total = trials.len();
+    trials
+        .par_iter()
+        .map(|t| {
+            let trial = importer.load(
+                &t.file,
+                t.static_path.as_deref(),
+                t.arm,
+                t.theta,
+                t.theta_rule,
+            )?;
+            let k = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+            progress(Progress::Imported { done: k, total });
+            Ok(LabelledTrial {
+                action: t.action.clone(),
+                trial,
+            })
+        })
+        .collect()
+}
+
+/// Fits one parametric HMM per action (in order of first appearance) to labelled trials.
+pub fn fit_actions(
+    trials: &[LabelledTrial],
+    options: &TrainOptions,
+    preprocessing: &Preprocessing,
+    manifest: Option<&Path>,
+    progress: &(dyn Fn(Progress) + Sync),
+) -> Result<ActionModel> {
+    if trials.is_empty() {
+        return Err(Error::Config("no training trials".into()));
+    }
+    let mut names: Vec<String> = Vec::new();
+    for t in trials {
+        if !names.contains(&t.action) {
+            names.push(t.action.clone());
+        }
+    }
+    let params = PhmmParams::new(options.states)
+        .max_jump(options.max_jump)
+        .max_iterations(options.iterations)
+        .cov_floor(options.cov_floor)
+        .tolerance(options.tolerance)
+        .end_mode(EndMode::MustEnd)
+        .check()
+        .map_err(|e| Error::Config(e.to_string()))?;
+    let mut actions = Vec::new();
+    for (index, name) in names.iter().enumerate() {
+        progress(Progress::Fitting {
+            action: name.clone(),
+            index,
+            total: names.len(),
+        });
+        let mine: Vec<&LabelledTrial> = trials.iter().filter(|t| &t.action == name).collect();
+        let seqs: Vec<DMatrix<f64>> = mine
+            .iter()
+            .map(|t| t.trial.arm_trajectory.to_matrix())
+            .collect();
+        let thetas: Vec<DVector<f64>> = mine
+            .iter()
+            .map(|t| DVector::from_row_slice(&t.trial.theta))
+            .collect();
+        if mine.len() < 3 {
+            return Err(Error::Config(format!(
+                "action `{name}` has {} training trial(s); a parametric HMM over a 2-D θ needs at \
+                 least 3 with different θ",
+                mine.len()
+            )));
+        }
+        let (phmm, report) = params.fit(&seqs, &thetas).map_err(|e| Error::Model {
+            context: format!("training action `{name}` ({} trials)", mine.len()),
+            message: e.to_string(),
+        })?;
+        let (mean, cov, lo, hi) = theta_stats(&thetas);
+        actions.push(Action {
+            name: name.clone(),
+            phmm,
+            theta_mean: mean,
+            theta_cov: cov,
+            theta_min: lo,
+            theta_max: hi,
+            n_trials: mine.len(),
+            iterations: report.iterations,
+            converged: report.converged,
+            final_log_likelihood: report.log_likelihoods.last().copied().unwrap_or(f64::NAN),
+            median_frames: median(seqs.iter().map(|s| s.nrows() as f64).collect()),
+        });
+    }
+    let arm_lengths = ArmLengths {
+        upper_arm: median(trials.iter().map(|t| t.trial.arm_lengths[0]).collect()),
+        forearm_hand: median(trials.iter().map(|t| t.trial.arm_lengths[1]).collect()),
+    };
+    Ok(ActionModel {
+        actions,
+        arm_lengths,
+        theta_frame: THETA_FRAME.to_string(),
+        preprocessing: preprocessing.clone(),
+        provenance: Provenance {
+            tool: format!("actrack {}", env!("CARGO_PKG_VERSION")),
+            created: now_iso8601(),
+            manifest: manifest.map(|m| m.display().to_string()),
+            files: trials
+                .iter()
+                .map(|t| t.trial.source.display().to_string())
+                .collect(),
+            states: options.states,
+            max_jump: options.max_jump,
+            max_iterations: options.iterations,
+            cov_floor: options.cov_floor,
+        },
+    })
+}
+
+fn theta_stats(thetas: &[DVector<f64>]) -> ([f64; 2], [[f64; 2]; 2], [f64; 2], [f64; 2]) {
+    let n = thetas.len().max(1) as f64;
+    let mut mean = [0.0; 2];
+    let mut lo = [f64::INFINITY; 2];
+    let mut hi = [f64::NEG_INFINITY; 2];
+    for t in thetas {
+        for k in 0..2 {
+            mean[k] += t[k] / n;
+            lo[k] = lo[k].min(t[k]);
+            hi[k] = hi[k].max(t[k]);
+        }
+    }
+    let mut cov = [[0.0; 2]; 2];
+    for t in thetas {
+        for a in 0..2 {
+            for b in 0..2 {
+                cov[a][b] += (t[a] - mean[a]) * (t[b] - mean[b]) / (n - 1.0).max(1.0);
+            }
+        }
+    }
+    (mean, cov, lo, hi)
+}
+
+/// Score of one action for one sequence.
+#[derive(Clone, Debug, Serialize)]
+pub struct ActionScore {
+    /// The action.
+    pub action: String,
+    /// log P(X | λ_a, θ̂_a).
+    pub log_likelihood: f64,
+    /// θ̂_a (actor frame, metres).
+    pub theta: [f64; 2],
+}
+
+/// Recognition result for one sequence.
+#[derive(Clone, Debug, Serialize)]
+pub struct Classification {
+    /// Per action, in model order.
+    pub scores: Vec<ActionScore>,
+    /// The recognised action (largest log-likelihood).
+    pub action: String,
+    /// Its θ̂.
+    pub theta: [f64; 2],
+}
+
+/// Recognises the action of whole or partial sequences with a model.
+#[derive(Debug)]
+pub struct Classifier<'a> {
+    model: &'a ActionModel,
+    /// Models without exit modelling, for sequences cut before their end.
+    truncated: Vec<Phmm>,
+}
+
+impl<'a> Classifier<'a> {
+    /// A classifier for `model`.
+    pub fn new(model: &'a ActionModel) -> Result<Classifier<'a>> {
+        let truncated = model
+            .actions
+            .iter()
+            .map(|a| {
+                truncate(&a.phmm).map_err(|e| Error::Model {
+                    context: format!("action `{}`", a.name),
+                    message: e.to_string(),
+                })
+            })
+            .collect::<Result<_>>()?;
+        Ok(Classifier { model, truncated })
+    }
+
+    /// Classifies a sequence (T × 9, actor frame). `partial`: the sequence is the beginning of
+    /// an action only (the models' exit is ignored and θ is estimated by the MAP variant with
+    /// each action's training θ distribution as the prior).
+    pub fn classify(&self, x: &DMatrix<f64>, partial: bool) -> Result<Classification> {
+        let mut scores = Vec::new();
+        for (a, trunc) in self.model.actions.iter().zip(&self.truncated) {
+            let err = |e: actrack_phmm::PhmmError| Error::Model {
+                context: format!("estimating θ for action `{}`", a.name),
+                message: e.to_string(),
+            };
+            let est = if partial {
+                let mean = DVector::from_row_slice(&a.theta_mean);
+                let c = a.theta_cov;
+                // Guard against a degenerate training spread (all θ equal): at least 1 cm².
+                let prior_cov = DMatrix::from_row_slice(
+                    2,
+                    2,
+                    &[c[0][0].max(1e-4), c[0][1], c[1][0], c[1][1].max(1e-4)],
+                );
+                let opts = ThetaEmOptions {
+                    init: Some(mean.clone()),
+                    prior: Some((mean, prior_cov)),
+                    ..ThetaEmOptions::default()
+                };
+                trunc.estimate_theta(x, &opts).map_err(err)?
+            } else {
+                a.phmm
+                    .estimate_theta(x, &ThetaEmOptions::default())
+                    .map_err(err)?
+            };
+            scores.push(ActionScore {
+                action: a.name.clone(),
+                log_likelihood: est.log_likelihood,
+                theta: [est.theta[0], est.theta[1]],
+            });
+        }
+        let best = scores
+            .iter()
+            .enumerate()
+            .max_by(|a, b| a.1.log_likelihood.total_cmp(&b.1.log_likelihood))
+            .map_or(0, |(k, _)| k);
+        Ok(Classification {
+            action: scores[best].action.clone(),
+            theta: scores[best].theta,
+            scores,
+        })
+    }
+}
+
+/// The same parametric HMM without exit modelling (`EndMode::None`, `a_NN = 1`), for sequences
+/// that stop before the action ends.
+pub fn truncate(phmm: &Phmm) -> Result<Phmm, actrack_phmm::PhmmError> {
+    let n = phmm.n_states();
+    let start: Vec<f64> = (0..n).map(|i| phmm.start_prob(i)).collect();
+    let mut a = DMatrix::from_fn(n, n, |i, j| phmm.transition(i, j));
+    for i in 0..n {
+        let s: f64 = a.row(i).sum();
+        if s > 0.0 {
+            for j in 0..n {
+                a[(i, j)] /= s;
+            }
+        } else {
+            a[(i, i)] = 1.0;
+        }
+    }
+    let mut bias = Vec::with_capacity(n);
+    let mut weights = Vec::with_capacity(n);
+    let mut covs = Vec::with_capacity(n);
+    for i in 0..n {
+        let (b, w) = phmm.mean_affine(i);
+        bias.push(b);
+        weights.push(w);
+        covs.push(phmm.covariance(i).clone());
+    }
+    Phmm::from_params(
+        &start,
+        &a,
+        &vec![0.0; n],
+        &bias,
+        &weights,
+        &covs,
+        phmm.max_jump(),
+        EndMode::None,
+    )
+}
+
+/// Result for one evaluated trial.
+#[derive(Clone, Debug, Serialize)]
+pub struct TrialResult {
+    /// The movement file.
+    pub file: String,
+    /// True label.
+    pub action: String,
+    /// True θ (rule or explicit).
+    pub theta_true: [f64; 2],
+    /// Fraction of the trial seen (1 = whole).
+    pub fraction: f64,
+    /// The classification.
+    pub result: Classification,
+    /// ‖θ̂ − θ‖ in metres for the true action's θ̂.
+    pub theta_error: f64,
+}
+
+/// Classifies the first `fraction` of each labelled trial.
+pub fn evaluate(
+    classifier: &Classifier<'_>,
+    trials: &[LabelledTrial],
+    fraction: f64,
+) -> Result<Vec<TrialResult>> {
+    trials
+        .par_iter()
+        .map(|t| {
+            let x = t.trial.arm_trajectory.to_matrix();
+            let n = ((x.nrows() as f64 * fraction).ceil() as usize).clamp(2, x.nrows());
+            let x = x.rows(0, n).into_owned();
+            let partial = fraction < 1.0;
+            let result = classifier.classify(&x, partial)?;
+            let own = result.scores.iter().find(|s| s.action == t.action);
+            let theta_error = own.map_or(f64::NAN, |s| {
+                (s.theta[0] - t.trial.theta[0]).hypot(s.theta[1] - t.trial.theta[1])
+            });
+            Ok(TrialResult {
+                file: t.trial.source.display().to_string(),
+                action: t.action.clone(),
+                theta_true: t.trial.theta,
+                fraction,
+                result,
+                theta_error,
+            })
+        })
+        .collect()
+}
+
+/// Confusion matrix `[true][predicted]` over `actions` (labels outside it are ignored).
+pub fn confusion(results: &[TrialResult], actions: &[&str]) -> Vec<Vec<usize>> {
+    let mut m = vec![vec![0; actions.len()]; actions.len()];
+    for r in results {
+        let t = actions.iter().position(|a| *a == r.action);
+        let p = actions.iter().position(|a| *a == r.result.action);
+        if let (Some(t), Some(p)) = (t, p) {
+            m[t][p] += 1;
+        }
+    }
+    m
+}
+
+/// The `q`-quantile (0…1, linear interpolation) of finite values; NaN when none.
+pub fn quantile(values: &[f64], q: f64) -> f64 {
+    let mut v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    let pos = q.clamp(0.0, 1.0) * (v.len() - 1) as f64;
+    let i = pos.floor() as usize;
+    let j = (i + 1).min(v.len() - 1);
+    v[i] + (pos - i as f64) * (v[j] - v[i])
+}
+
+/// Formats a confusion matrix as an aligned text table.
+pub fn format_confusion(m: &[Vec<usize>], actions: &[&str]) -> String {
+    let w = actions.iter().map(|a| a.len()).max().unwrap_or(4).max(6);
+    let mut s = format!("{:w$}", "true \\ pred");
+    for a in actions {
+        s.push_str(&format!("  {a:>w$}"));
+    }
+    s.push('\n');
+    for (k, row) in m.iter().enumerate() {
+        s.push_str(&format!("{:w$}", actions[k]));
+        for c in row {
+            s.push_str(&format!("  {c:>w$}"));
+        }
+        s.push('\n');
+    }
+    s
+}
