@@ -7,8 +7,12 @@
 //! Not implemented yet: see the project's issues.
 
 pub mod error;
+pub mod eval;
+pub mod frames;
 pub mod manifest;
 pub mod mocap;
 pub mod model;
+pub mod scene;
+pub mod track_csv;
 pub mod train;
 pub use error::{Error, Result};

@@ -1,0 +1,676 @@
+//! Frame sources: a directory of PNG/JPEG frames (natural order), a YUV4MPEG2 (`.y4m`) file or
+//! `-` for y4m on stdin, and any other video through an `ffmpeg` subprocess that decodes to y4m on
+//! a pipe (parsed by the same reader).
+//!
+//! Every frame comes out as RGB8. Errors name the source and the frame (0-based index and, for
+//! image directories, the file). With `skip_bad_frames`, corrupt frames and frames of another
+//! size are skipped and reported by [`FrameSource::skipped`].
+
+use std::io::{BufRead, BufReader, Read, Write};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+
+use image::RgbImage;
+
+use crate::error::{Error, Result};
+
+/// Default frame rate when the source has none (image directories) and `--fps` is not given.
+pub const DEFAULT_FPS: f64 = 30.0;
+
+/// One decoded frame.
+#[derive(Clone, Debug)]
+pub struct Frame {
+    /// 0-based index in the source (skipped frames keep their index).
+    pub index: usize,
+    /// Time in seconds from the first frame (index / fps).
+    pub time: f64,
+    /// The pixels.
+    pub image: RgbImage,
+}
+
+/// Options of [`FrameSource::open`].
+#[derive(Clone, Debug, Default)]
+pub struct FrameOptions {
+    /// Override of the frame rate.
+    pub fps: Option<f64>,
+    /// Skip corrupt frames and frames of another size instead of failing.
+    pub skip_bad_frames: bool,
+}
+
+enum Inner {
+    Dir { files: Vec<PathBuf>, next: usize },
+    Y4m(Box<Y4mReader>, Option<Child>),
+}
+
+/// A sequence of frames from a directory, a y4m stream or ffmpeg.
+pub struct FrameSource {
+    inner: Inner,
+    name: PathBuf,
+    fps: f64,
+    skip_bad: bool,
+    size: Option<(u32, u32)>,
+    skipped: Vec<(usize, String)>,
+}
+
+/// How to install ffmpeg, for messages.
+pub const FFMPEG_HINT: &str = "ffmpeg is not installed (or not on PATH); install it \
+(Debian/Ubuntu: `sudo apt-get install ffmpeg`, Fedora: `sudo dnf install ffmpeg`, macOS: \
+`brew install ffmpeg`, Windows: `winget install ffmpeg`), or convert the video to a directory of \
+PNG frames or a .y4m file";
+
+impl FrameSource {
+    /// Opens `input`: `-` (y4m on stdin), a directory of PNG/JPEG images, a `.y4m` file, or any
+    /// other video file through ffmpeg.
+    pub fn open(input: &Path, opts: &FrameOptions) -> Result<Self> {
+        if let Some(f) = opts.fps
+            && !(f.is_finite() && f > 0.0)
+        {
+            return Err(Error::Config(format!("--fps must be positive, got {f}")));
+        }
+        let (inner, fps) = if input.as_os_str() == "-" {
+            let r = Y4mReader::new(Box::new(BufReader::new(std::io::stdin())), input)?;
+            let fps = r.fps;
+            (Inner::Y4m(Box::new(r), None), fps)
+        } else if input.is_dir() {
+            (
+                Inner::Dir {
+                    files: list_images(input)?,
+                    next: 0,
+                },
+                None,
+            )
+        } else if !input.exists() {
+            return Err(Error::read(
+                input,
+                std::io::Error::new(std::io::ErrorKind::NotFound, "no such file or directory"),
+            ));
+        } else if input
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("y4m"))
+        {
+            let f = std::fs::File::open(input).map_err(|e| Error::read(input, e))?;
+            let r = Y4mReader::new(Box::new(BufReader::new(f)), input)?;
+            let fps = r.fps;
+            (Inner::Y4m(Box::new(r), None), fps)
+        } else {
+            let (r, child) = spawn_ffmpeg(input)?;
+            let fps = r.fps;
+            (Inner::Y4m(Box::new(r), Some(child)), fps)
+        };
+        Ok(Self {
+            inner,
+            name: input.to_path_buf(),
+            fps: opts.fps.or(fps).unwrap_or(DEFAULT_FPS),
+            skip_bad: opts.skip_bad_frames,
+            size: None,
+            skipped: Vec::new(),
+        })
+    }
+
+    /// Frames per second (the source's, the override, or [`DEFAULT_FPS`]).
+    pub fn fps(&self) -> f64 {
+        self.fps
+    }
+
+    /// Number of frames when known in advance (image directories).
+    pub fn len_hint(&self) -> Option<usize> {
+        match &self.inner {
+            Inner::Dir { files, .. } => Some(files.len()),
+            Inner::Y4m(..) => None,
+        }
+    }
+
+    /// Frames skipped so far (index, reason).
+    pub fn skipped(&self) -> &[(usize, String)] {
+        &self.skipped
+    }
+
+    /// The next frame, `None` at the end.
+    pub fn next_frame(&mut self) -> Result<Option<Frame>> {
+        loop {
+            let (index, got) = match &mut self.inner {
+                Inner::Dir { files, next } => {
+                    let Some(file) = files.get(*next) else {
+                        return Ok(None);
+                    };
+                    let index = *next;
+                    *next += 1;
+                    let img = image::open(file).map(|i| i.to_rgb8()).map_err(|e| {
+                        (
+                            format!(
+                                "frame {index} ({}): corrupt or unreadable image: {e}",
+                                file.display()
+                            ),
+                            true,
+                        )
+                    });
+                    (index, img)
+                }
+                Inner::Y4m(r, child) => {
+                    let index = r.frames_read;
+                    match r.read_frame() {
+                        Ok(Some(img)) => (index, Ok(img)),
+                        Ok(None) => {
+                            if let Some(c) = child.as_mut() {
+                                finish_ffmpeg(c, &self.name, index)?;
+                            }
+                            return Ok(None);
+                        }
+                        Err(msg) => {
+                            // A truncated stream cannot be resynchronised: always an error.
+                            if let Some(c) = child.as_mut() {
+                                let _ = c.kill();
+                                let _ = c.wait();
+                            }
+                            return Err(Error::invalid(
+                                &self.name,
+                                format!("frame {index}: {msg}"),
+                            ));
+                        }
+                    }
+                }
+            };
+            let img = match got {
+                Ok(img) => img,
+                Err((msg, _)) => {
+                    if self.skip_bad {
+                        self.skipped.push((index, msg));
+                        continue;
+                    }
+                    return Err(Error::invalid(&self.name, msg));
+                }
+            };
+            let dims = img.dimensions();
+            match self.size {
+                None => self.size = Some(dims),
+                Some(s) if s != dims => {
+                    let msg = format!(
+                        "frame {index}{}: size {}×{} differs from the first frame's {}×{}",
+                        self.frame_file(index)
+                            .map(|f| format!(" ({})", f.display()))
+                            .unwrap_or_default(),
+                        dims.0,
+                        dims.1,
+                        s.0,
+                        s.1
+                    );
+                    if self.skip_bad {
+                        self.skipped.push((index, msg));
+                        continue;
+                    }
+                    return Err(Error::invalid(&self.name, msg));
+                }
+                Some(_) => {}
+            }
+            return Ok(Some(Frame {
+                index,
+                time: index as f64 / self.fps,
+                image: img,
+            }));
+        }
+    }
+
+    fn frame_file(&self, index: usize) -> Option<&Path> {
+        match &self.inner {
+            Inner::Dir { files, .. } => files.get(index).map(PathBuf::as_path),
+            Inner::Y4m(..) => None,
+        }
+    }
+}
+
+impl Drop for FrameSource {
+    fn drop(&mut self) {
+        if let Inner::Y4m(_, Some(child)) = &mut self.inner {
+            let _ = child.kill();
+            let _ = child.wait();
+        }
+    }
+}
+
+/// The PNG/JPEG files of a directory in natural order.
+pub fn list_images(dir: &Path) -> Result<Vec<PathBuf>> {
+    let rd = std::fs::read_dir(dir).map_err(|e| Error::read(dir, e))?;
+    let mut files = Vec::new();
+    for entry in rd {
+        let entry = entry.map_err(|e| Error::read(dir, e))?;
+        let p = entry.path();
+        let ok = p.extension().and_then(|e| e.to_str()).is_some_and(|e| {
+            ["png", "jpg", "jpeg"]
+                .iter()
+                .any(|x| e.eq_ignore_ascii_case(x))
+        });
+        if ok && p.is_file() {
+            files.push(p);
+        }
+    }
+    if files.is_empty() {
+        return Err(Error::invalid(
+            dir,
+            "no frames: the directory has no .png, .jpg or .jpeg files",
+        ));
+    }
+    files.sort_by(|a, b| {
+        let a = a
+            .file_name()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let b = b
+            .file_name()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        natord::compare(&a, &b)
+    });
+    Ok(files)
+}
+
+fn spawn_ffmpeg(input: &Path) -> Result<(Y4mReader, Child)> {
+    let mut child = Command::new("ffmpeg")
+        .args(["-hide_banner", "-loglevel", "error", "-nostdin", "-i"])
+        .arg(input)
+        .args([
+            "-f",
+            "yuv4mpegpipe",
+            "-pix_fmt",
+            "yuv444p",
+            "-color_range",
+            "pc",
+            "-strict",
+            "-1",
+            "-",
+        ])
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .map_err(|e| {
+            if e.kind() == std::io::ErrorKind::NotFound {
+                Error::invalid(input, FFMPEG_HINT)
+            } else {
+                Error::read(input, e)
+            }
+        })?;
+    let Some(out) = child.stdout.take() else {
+        return Err(Error::invalid(input, "ffmpeg: no output pipe"));
+    };
+    match Y4mReader::new(Box::new(BufReader::new(out)), input) {
+        Ok(r) => Ok((r, child)),
+        Err(e) => {
+            let _ = child.kill();
+            let status = child.wait();
+            let mut msg = String::new();
+            if let Some(mut s) = child.stderr.take() {
+                let _ = s.read_to_string(&mut msg);
+            }
+            if msg.trim().is_empty() {
+                Err(e)
+            } else {
+                let code = status.ok().and_then(|s| s.code()).unwrap_or(-1);
+                Err(Error::invalid(
+                    input,
+                    format!("ffmpeg cannot decode it (exit {code}): {}", msg.trim()),
+                ))
+            }
+        }
+    }
+}
+
+fn finish_ffmpeg(child: &mut Child, input: &Path, frames: usize) -> Result<()> {
+    let status = child.wait().map_err(|e| Error::read(input, e))?;
+    if status.success() {
+        return Ok(());
+    }
+    let mut msg = String::new();
+    if let Some(mut s) = child.stderr.take() {
+        let _ = s.read_to_string(&mut msg);
+    }
+    Err(Error::invalid(
+        input,
+        format!("ffmpeg failed after {frames} frames: {}", msg.trim()),
+    ))
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Chroma {
+    C420,
+    C422,
+    C444,
+    Mono,
+}
+
+/// A YUV4MPEG2 stream reader (8-bit 4:2:0, 4:2:2, 4:4:4 and mono), converting to RGB8 with
+/// BT.601 coefficients (limited range unless the header says `XCOLORRANGE=FULL`).
+pub struct Y4mReader {
+    r: Box<dyn BufRead>,
+    width: usize,
+    height: usize,
+    chroma: Chroma,
+    full_range: bool,
+    /// Frame rate from the header's `F` parameter.
+    pub fps: Option<f64>,
+    frames_read: usize,
+    buf: Vec<u8>,
+}
+
+impl Y4mReader {
+    /// Reads the stream header; `name` is used in messages.
+    pub fn new(mut r: Box<dyn BufRead>, name: &Path) -> Result<Self> {
+        let mut line = Vec::new();
+        r.read_until(b'\n', &mut line)
+            .map_err(|e| Error::read(name, e))?;
+        if line.is_empty() {
+            return Err(Error::invalid(
+                name,
+                "empty input: expected a YUV4MPEG2 stream",
+            ));
+        }
+        let text = String::from_utf8_lossy(&line);
+        let text = text.trim_end();
+        let mut it = text.split(' ');
+        if it.next() != Some("YUV4MPEG2") {
+            return Err(Error::invalid(
+                name,
+                "not a YUV4MPEG2 stream (the header must start with `YUV4MPEG2`)",
+            ));
+        }
+        let (mut w, mut h, mut fps, mut chroma, mut full) =
+            (0usize, 0usize, None, Chroma::C420, false);
+        for tok in it {
+            let (k, v) = tok.split_at(tok.len().min(1));
+            match k {
+                "W" => w = v.parse().unwrap_or(0),
+                "H" => h = v.parse().unwrap_or(0),
+                "F" => {
+                    if let Some((a, b)) = v.split_once(':') {
+                        let (a, b): (f64, f64) =
+                            (a.parse().unwrap_or(0.0), b.parse().unwrap_or(0.0));
+                        if a > 0.0 && b > 0.0 {
+                            fps = Some(a / b);
+                        }
+                    }
+                }
+                "C" => {
+                    chroma = match v {
+                        "420" | "420jpeg" | "420paldv" | "420mpeg2" => Chroma::C420,
+                        "422" => Chroma::C422,
+                        "444" => Chroma::C444,
+                        "mono" => Chroma::Mono,
+                        other => {
+                            return Err(Error::invalid(
+                                name,
+                                format!(
+                                    "unsupported y4m colour space C{other} (8-bit 420, 422, 444 and mono are supported)"
+                                ),
+                            ));
+                        }
+                    }
+                }
+                "X" if v.eq_ignore_ascii_case("COLORRANGE=FULL") => full = true,
+                _ => {}
+            }
+        }
+        if w == 0 || h == 0 {
+            return Err(Error::invalid(
+                name,
+                "y4m header without a valid width (W) and height (H)",
+            ));
+        }
+        Ok(Self {
+            r,
+            width: w,
+            height: h,
+            chroma,
+            full_range: full,
+            fps,
+            frames_read: 0,
+            buf: Vec::new(),
+        })
+    }
+
+    fn plane_sizes(&self) -> (usize, usize, usize) {
+        let (w, h) = (self.width, self.height);
+        match self.chroma {
+            Chroma::C420 => (w * h, w.div_ceil(2), h.div_ceil(2)),
+            Chroma::C422 => (w * h, w.div_ceil(2), h),
+            Chroma::C444 => (w * h, w, h),
+            Chroma::Mono => (w * h, 0, 0),
+        }
+    }
+
+    /// Reads the next frame; `Ok(None)` at a clean end, `Err(message)` on truncation.
+    pub fn read_frame(&mut self) -> std::result::Result<Option<RgbImage>, String> {
+        let mut line = Vec::new();
+        let n = self
+            .r
+            .read_until(b'\n', &mut line)
+            .map_err(|e| format!("read error: {e}"))?;
+        if n == 0 {
+            return Ok(None);
+        }
+        if !line.starts_with(b"FRAME") || line.last() != Some(&b'\n') {
+            return Err("truncated or corrupt y4m stream: expected a FRAME header".into());
+        }
+        let (ysz, cw, ch) = self.plane_sizes();
+        let total = ysz + 2 * cw * ch;
+        self.buf.resize(total, 0);
+        let mut got = 0;
+        while got < total {
+            match self.r.read(&mut self.buf[got..]) {
+                Ok(0) => break,
+                Ok(k) => got += k,
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(e) => return Err(format!("read error: {e}")),
+            }
+        }
+        if got < total {
+            return Err(format!(
+                "truncated y4m stream: frame data has {got} of {total} bytes"
+            ));
+        }
+        self.frames_read += 1;
+        Ok(Some(self.to_rgb()))
+    }
+
+    fn to_rgb(&self) -> RgbImage {
+        let (w, h) = (self.width, self.height);
+        let (ysz, cw, ch) = self.plane_sizes();
+        let (yp, rest) = self.buf.split_at(ysz);
+        let (up, vp) = rest.split_at(cw * ch);
+        let mut img = RgbImage::new(w as u32, h as u32);
+        for (i, px) in img.pixels_mut().enumerate() {
+            let (x, y) = (i % w, i / w);
+            let yy = f64::from(yp[i]);
+            let (u, v) = match self.chroma {
+                Chroma::Mono => (128.0, 128.0),
+                Chroma::C444 => (f64::from(up[i]), f64::from(vp[i])),
+                Chroma::C422 => (f64::from(up[y * cw + x / 2]), f64::from(vp[y * cw + x / 2])),
+                Chroma::C420 => (
+                    f64::from(up[(y / 2) * cw + x / 2]),
+                    f64::from(vp[(y / 2) * cw + x / 2]),
+                ),
+            };
+            let (yy, cb, cr) = if self.full_range {
+                (yy, u - 128.0, v - 128.0)
+            } else {
+                (
+                    (yy - 16.0) * 255.0 / 219.0,
+                    (u - 128.0) * 255.0 / 224.0,
+                    (v - 128.0) * 255.0 / 224.0,
+                )
+            };
+            let r = yy + 1.402 * cr;
+            let g = yy - 0.344_136 * cb - 0.714_136 * cr;
+            let b = yy + 1.772 * cb;
+            let c = |x: f64| x.round().clamp(0.0, 255.0) as u8;
+            px.0 = if self.chroma == Chroma::Mono {
+                [c(yy); 3]
+            } else {
+                [c(r), c(g), c(b)]
+            };
+        }
+        img
+    }
+}
+
+/// Writes frames as a YUV4MPEG2 stream: `Cmono` when every frame is grey (lossless), else full-range
+/// 4:4:4 BT.601.
+pub fn write_y4m<W: Write>(mut w: W, frames: &[RgbImage], fps: f64) -> std::io::Result<()> {
+    let Some(first) = frames.first() else {
+        return Ok(());
+    };
+    let grey = frames
+        .iter()
+        .all(|f| f.pixels().all(|p| p.0[0] == p.0[1] && p.0[1] == p.0[2]));
+    let (num, den) = ((fps * 1000.0).round() as u64, 1000);
+    let c = if grey {
+        "Cmono XCOLORRANGE=FULL"
+    } else {
+        "C444 XCOLORRANGE=FULL"
+    };
+    writeln!(
+        w,
+        "YUV4MPEG2 W{} H{} F{num}:{den} Ip A1:1 {c}",
+        first.width(),
+        first.height()
+    )?;
+    for f in frames {
+        w.write_all(b"FRAME\n")?;
+        if grey {
+            let y: Vec<u8> = f.pixels().map(|p| p.0[0]).collect();
+            w.write_all(&y)?;
+        } else {
+            let mut planes = [Vec::new(), Vec::new(), Vec::new()];
+            for p in f.pixels() {
+                let [r, g, b] = p.0.map(f64::from);
+                let y = 0.299 * r + 0.587 * g + 0.114 * b;
+                let cb = 128.0 + (b - y) / 1.772;
+                let cr = 128.0 + (r - y) / 1.402;
+                for (pl, v) in planes.iter_mut().zip([y, cb, cr]) {
+                    pl.push(v.round().clamp(0.0, 255.0) as u8);
+                }
+            }
+            for pl in &planes {
+                w.write_all(pl)?;
+            }
+        }
+    }
+    w.flush()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn frames(n: usize, w: u32, h: u32) -> Vec<RgbImage> {
+        (0..n)
+            .map(|k| {
+                RgbImage::from_fn(w, h, |x, y| {
+                    image::Rgb([(x * 7 + k as u32) as u8, (y * 5) as u8, ((x + y) * 3) as u8])
+                })
+            })
+            .collect()
+    }
+
+    #[test]
+    fn image_dir_natural_order_and_errors() {
+        let d = tempfile::tempdir().unwrap();
+        let f = frames(3, 8, 6);
+        for (i, name) in ["f10.png", "f2.png", "f1.png"].iter().enumerate() {
+            f[i].save(d.path().join(name)).unwrap();
+        }
+        let mut s = FrameSource::open(d.path(), &FrameOptions::default()).unwrap();
+        assert!((s.fps() - DEFAULT_FPS).abs() < 1e-12);
+        let order: Vec<_> = std::iter::from_fn(|| s.next_frame().unwrap())
+            .map(|fr| fr.image)
+            .collect();
+        assert_eq!(order, vec![f[2].clone(), f[1].clone(), f[0].clone()]);
+        // Changing size names the frame.
+        RgbImage::new(4, 4).save(d.path().join("f3.png")).unwrap();
+        let mut s = FrameSource::open(d.path(), &FrameOptions::default()).unwrap();
+        let e = loop {
+            match s.next_frame() {
+                Ok(Some(_)) => {}
+                Ok(None) => panic!("no error"),
+                Err(e) => break e.to_string(),
+            }
+        };
+        assert!(
+            e.contains("frame 2") && e.contains("f3.png") && e.contains("differs"),
+            "{e}"
+        );
+        // Corrupt image, skipped on request.
+        std::fs::write(d.path().join("f3.png"), b"not a png").unwrap();
+        let mut s = FrameSource::open(
+            d.path(),
+            &FrameOptions {
+                fps: Some(10.0),
+                skip_bad_frames: true,
+            },
+        )
+        .unwrap();
+        let n = std::iter::from_fn(|| s.next_frame().unwrap()).count();
+        assert_eq!(n, 3);
+        assert_eq!(s.skipped().len(), 1);
+        assert!(s.skipped()[0].1.contains("corrupt"));
+        let empty = tempfile::tempdir().unwrap();
+        let e = FrameSource::open(empty.path(), &FrameOptions::default())
+            .err()
+            .unwrap();
+        assert!(e.is_input_error() && e.to_string().contains("no frames"));
+    }
+
+    #[test]
+    fn y4m_roundtrip_and_truncation() {
+        let d = tempfile::tempdir().unwrap();
+        let f = frames(3, 9, 5);
+        let p = d.path().join("a.y4m");
+        write_y4m(std::fs::File::create(&p).unwrap(), &f, 25.0).unwrap();
+        let mut s = FrameSource::open(&p, &FrameOptions::default()).unwrap();
+        assert!((s.fps() - 25.0).abs() < 1e-9);
+        let got: Vec<_> = std::iter::from_fn(|| s.next_frame().unwrap()).collect();
+        assert_eq!(got.len(), 3);
+        for (a, b) in got.iter().zip(&f) {
+            for (pa, pb) in a.image.pixels().zip(b.pixels()) {
+                for c in 0..3 {
+                    assert!((i32::from(pa.0[c]) - i32::from(pb.0[c])).abs() <= 2);
+                }
+            }
+        }
+        // Grey frames are lossless (Cmono).
+        let g: Vec<_> = f
+            .iter()
+            .map(|i| image::DynamicImage::ImageRgb8(i.clone()).to_luma8())
+            .map(|l| image::DynamicImage::ImageLuma8(l).to_rgb8())
+            .collect();
+        let mut bytes = Vec::new();
+        write_y4m(&mut bytes, &g, 30.0).unwrap();
+        let mut r = Y4mReader::new(
+            Box::new(std::io::Cursor::new(bytes.clone())),
+            Path::new("-"),
+        )
+        .unwrap();
+        assert_eq!(r.read_frame().unwrap().unwrap(), g[0]);
+        // Truncated.
+        let cut = bytes.len() - 10;
+        std::fs::write(&p, &bytes[..cut]).unwrap();
+        let mut s = FrameSource::open(&p, &FrameOptions::default()).unwrap();
+        let e = loop {
+            match s.next_frame() {
+                Ok(Some(_)) => {}
+                Ok(None) => panic!("no error"),
+                Err(e) => break e.to_string(),
+            }
+        };
+        assert!(e.contains("frame 2") && e.contains("truncated"), "{e}");
+    }
+
+    #[test]
+    fn y4m_420_limited() {
+        // 2×2 4:2:0 limited range: Y=235 (white), neutral chroma.
+        let data = b"YUV4MPEG2 W2 H2 F30:1 C420jpeg\nFRAME\n\xeb\xeb\x10\x10\x80\x80".to_vec();
+        let mut r = Y4mReader::new(Box::new(std::io::Cursor::new(data)), Path::new("x")).unwrap();
+        let img = r.read_frame().unwrap().unwrap();
+        assert_eq!(img.get_pixel(0, 0).0, [255, 255, 255]);
+        assert_eq!(img.get_pixel(0, 1).0, [0, 0, 0]);
+        assert!(r.read_frame().unwrap().is_none());
+    }
+}

@@ -1,0 +1,277 @@
+//! The trajectory CSV of DESIGN.md, as the tracker writes it and as `eval` reads both it and the
+//! ground truth.
+//!
+//! Header, then one row per frame:
+//! `frame,time,action,theta_u,theta_v,px,py,pz,qx,qy,qz,rx,ry,rz` — frame index, seconds, action
+//! name (empty when none), θ in the actor frame (metres), shoulder p, elbow q, fingertip r in
+//! **world** coordinates (metres). The tracker's output adds `p_<action>…` (the action posterior),
+//! `theta_u_std,theta_v_std` (metres), `entropy` (histogram entropy of θ in [0, 1]) and `ess`.
+//! The reader finds columns by name, so extra columns are ignored.
+
+use std::io::Write;
+use std::path::Path;
+
+use crate::error::{Error, Result};
+
+/// The base columns shared by ground truth and tracker output.
+pub const BASE_COLUMNS: [&str; 14] = [
+    "frame", "time", "action", "theta_u", "theta_v", "px", "py", "pz", "qx", "qy", "qz", "rx",
+    "ry", "rz",
+];
+
+/// One row of a trajectory CSV.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TrajRow {
+    /// Frame index.
+    pub frame: usize,
+    /// Time in seconds.
+    pub time: f64,
+    /// Action name (empty for none).
+    pub action: String,
+    /// θ (actor frame, metres); NaN when unknown.
+    pub theta: [f64; 2],
+    /// Shoulder, elbow, fingertip (world, metres).
+    pub pose: [f64; 9],
+    /// Tracker output only: the action posterior, in the order of [`Trajectory::actions`].
+    pub posterior: Vec<f64>,
+    /// Tracker output only: per-component std of θ (metres).
+    pub theta_std: Option<[f64; 2]>,
+    /// Tracker output only: histogram entropy of θ in [0, 1].
+    pub entropy: Option<f64>,
+    /// Tracker output only: effective sample size.
+    pub ess: Option<f64>,
+}
+
+impl TrajRow {
+    /// A ground-truth row.
+    pub fn truth(frame: usize, time: f64, action: &str, theta: [f64; 2], pose: [f64; 9]) -> Self {
+        Self {
+            frame,
+            time,
+            action: action.into(),
+            theta,
+            pose,
+            posterior: Vec::new(),
+            theta_std: None,
+            entropy: None,
+            ess: None,
+        }
+    }
+}
+
+/// A trajectory CSV in memory.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Trajectory {
+    /// Names of the posterior columns (`p_<name>`); empty for ground truth.
+    pub actions: Vec<String>,
+    /// The rows, in file order.
+    pub rows: Vec<TrajRow>,
+}
+
+fn fmt(x: f64) -> String {
+    if x.is_nan() {
+        String::new()
+    } else {
+        format!("{x:.6}")
+    }
+}
+
+impl Trajectory {
+    /// `true` when the rows carry tracker columns.
+    pub fn is_track(&self) -> bool {
+        self.rows.first().is_some_and(|r| r.theta_std.is_some())
+    }
+
+    /// Writes the CSV to `out`.
+    pub fn write_to<W: Write>(&self, mut out: W) -> std::io::Result<()> {
+        let track = self.is_track();
+        let mut header: Vec<String> = BASE_COLUMNS.iter().map(|s| (*s).to_string()).collect();
+        if track {
+            header.extend(self.actions.iter().map(|a| format!("p_{a}")));
+            header.extend(["theta_u_std", "theta_v_std", "entropy", "ess"].map(String::from));
+        }
+        writeln!(out, "{}", header.join(","))?;
+        for r in &self.rows {
+            let mut f = vec![
+                r.frame.to_string(),
+                format!("{:.6}", r.time),
+                r.action.clone(),
+                fmt(r.theta[0]),
+                fmt(r.theta[1]),
+            ];
+            f.extend(r.pose.iter().map(|x| fmt(*x)));
+            if track {
+                f.extend(r.posterior.iter().map(|x| fmt(*x)));
+                let s = r.theta_std.unwrap_or([f64::NAN; 2]);
+                f.extend([
+                    fmt(s[0]),
+                    fmt(s[1]),
+                    fmt(r.entropy.unwrap_or(f64::NAN)),
+                    fmt(r.ess.unwrap_or(f64::NAN)),
+                ]);
+            }
+            writeln!(out, "{}", f.join(","))?;
+        }
+        out.flush()
+    }
+
+    /// Writes the CSV to `path` (through a temporary file renamed into place).
+    pub fn save(&self, path: &Path) -> Result<()> {
+        let tmp = temp_path(path);
+        let file = std::fs::File::create(&tmp).map_err(|e| Error::write(&tmp, e))?;
+        self.write_to(std::io::BufWriter::new(file))
+            .map_err(|e| Error::write(&tmp, e))?;
+        std::fs::rename(&tmp, path).map_err(|e| Error::write(path, e))
+    }
+
+    /// Reads a trajectory CSV (ground truth or tracker output).
+    pub fn load(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::read(path, e))?;
+        Self::parse(&text, path)
+    }
+
+    /// Parses CSV text; `path` is used in messages.
+    pub fn parse(text: &str, path: &Path) -> Result<Self> {
+        let mut lines = text
+            .lines()
+            .enumerate()
+            .filter(|(_, l)| !l.trim().is_empty() && !l.starts_with('#'));
+        let Some((_, header)) = lines.next() else {
+            return Err(Error::invalid(path, "empty file: expected a header line"));
+        };
+        let cols: Vec<&str> = header.split(',').map(str::trim).collect();
+        let find = |name: &str| cols.iter().position(|c| *c == name);
+        let mut base = [0usize; 14];
+        for (k, name) in BASE_COLUMNS.iter().enumerate() {
+            base[k] = find(name)
+                .ok_or_else(|| Error::parse(path, 1, format!("missing column `{name}`")))?;
+        }
+        let post: Vec<(String, usize)> = cols
+            .iter()
+            .enumerate()
+            .filter_map(|(i, c)| c.strip_prefix("p_").map(|a| (a.to_string(), i)))
+            .collect();
+        let extra = ["theta_u_std", "theta_v_std", "entropy", "ess"].map(find);
+        let mut rows = Vec::new();
+        for (ln, line) in lines {
+            let f: Vec<&str> = line.split(',').map(str::trim).collect();
+            if f.len() < cols.len() {
+                return Err(Error::parse(
+                    path,
+                    ln + 1,
+                    format!("{} fields, the header has {}", f.len(), cols.len()),
+                ));
+            }
+            let num = |i: usize| -> Result<f64> {
+                if f[i].is_empty() {
+                    return Ok(f64::NAN);
+                }
+                f[i].parse::<f64>().map_err(|_| {
+                    Error::parse(
+                        path,
+                        ln + 1,
+                        format!("column `{}`: `{}` is not a number", cols[i], f[i]),
+                    )
+                })
+            };
+            let frame = f[base[0]].parse::<usize>().map_err(|_| {
+                Error::parse(
+                    path,
+                    ln + 1,
+                    format!("column `frame`: `{}` is not a frame index", f[base[0]]),
+                )
+            })?;
+            let mut pose = [0.0; 9];
+            for j in 0..9 {
+                pose[j] = num(base[5 + j])?;
+            }
+            let posterior = post
+                .iter()
+                .map(|(_, i)| num(*i))
+                .collect::<Result<Vec<_>>>()?;
+            let opt = |i: Option<usize>| -> Result<Option<f64>> { i.map(num).transpose() };
+            let (su, sv) = (opt(extra[0])?, opt(extra[1])?);
+            rows.push(TrajRow {
+                frame,
+                time: num(base[1])?,
+                action: f[base[2]].to_string(),
+                theta: [num(base[3])?, num(base[4])?],
+                pose,
+                posterior,
+                theta_std: su.zip(sv).map(|(a, b)| [a, b]),
+                entropy: opt(extra[2])?,
+                ess: opt(extra[3])?,
+            });
+        }
+        Ok(Self {
+            actions: post.into_iter().map(|(a, _)| a).collect(),
+            rows,
+        })
+    }
+}
+
+/// `dir/.name.tmp-<pid>` beside `path`, for writing then renaming into place.
+pub fn temp_path(path: &Path) -> std::path::PathBuf {
+    let name = path
+        .file_name()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    path.with_file_name(format!(".{name}.tmp-{}", std::process::id()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn roundtrip_track_and_truth() {
+        let mut t = Trajectory {
+            actions: vec!["point".into(), "push".into()],
+            rows: Vec::new(),
+        };
+        for k in 0..3 {
+            t.rows.push(TrajRow {
+                frame: k,
+                time: k as f64 / 30.0,
+                action: "point".into(),
+                theta: [0.1, 0.5],
+                pose: [k as f64, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.25],
+                posterior: vec![0.75, 0.25],
+                theta_std: Some([0.01, 0.02]),
+                entropy: Some(0.5),
+                ess: Some(100.0),
+            });
+        }
+        let d = tempfile::tempdir().unwrap();
+        let p = d.path().join("t.csv");
+        t.save(&p).unwrap();
+        let back = Trajectory::load(&p).unwrap();
+        assert_eq!(back.actions, t.actions);
+        assert_eq!(back.rows.len(), 3);
+        assert!((back.rows[2].time - t.rows[2].time).abs() < 1e-6);
+        assert_eq!(back.rows[1].pose, t.rows[1].pose);
+        let truth = Trajectory {
+            actions: vec![],
+            rows: vec![TrajRow::truth(0, 0.0, "", [f64::NAN; 2], [0.0; 9])],
+        };
+        truth.save(&p).unwrap();
+        let back = Trajectory::load(&p).unwrap();
+        assert!(
+            !back.is_track() && back.rows[0].theta[0].is_nan() && back.rows[0].action.is_empty()
+        );
+        std::fs::write(&p, "frame,time\n").unwrap();
+        assert!(
+            Trajectory::load(&p)
+                .unwrap_err()
+                .to_string()
+                .contains("missing column `action`")
+        );
+        std::fs::write(
+            &p,
+            format!("{}\n0,0,a,x,0,0,0,0,0,0,0,0,0,0\n", BASE_COLUMNS.join(",")),
+        )
+        .unwrap();
+        let e = Trajectory::load(&p).unwrap_err().to_string();
+        assert!(e.contains(":2:") && e.contains("theta_u"), "{e}");
+    }
+}
