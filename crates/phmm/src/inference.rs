@@ -21,6 +21,11 @@ const HUGE: f64 = 1e280;
 pub(crate) struct Workspace {
     /// The sequence, frame-major (T × d).
     pub xrows: Vec<f64>,
+    /// The sequence, coordinate-major (d × T; nalgebra's storage of a T × d matrix).
+    pub xcols: Vec<f64>,
+    /// Whitened residuals of one state, coordinate-major (d × T), and their squared norms (T).
+    zcols: Vec<f64>,
+    acc: Vec<f64>,
     /// State means for the current θ (N × d).
     pub means: Vec<f64>,
     /// Log emission densities ℓ_t(j) (T × N).
@@ -43,9 +48,6 @@ pub(crate) struct Workspace {
     pub gamma: Vec<f64>,
     /// Σ_t ξ_t(i, i+k), N × (J+1).
     pub xi: Vec<f64>,
-    /// Scratch of length d.
-    r: Vec<f64>,
-    z: Vec<f64>,
 }
 
 fn resize(v: &mut Vec<f64>, len: usize) {
@@ -144,9 +146,16 @@ pub(crate) fn check_theta(model: &Phmm, theta: &[f64], what: &str) -> Result<(),
 impl Workspace {
     /// Load a sequence and the means for an internal θ, and compute the log emissions.
     pub(crate) fn prepare(&mut self, model: &Phmm, x: &DMatrix<f64>, theta_int: &[f64]) {
-        rows_into(x, &mut self.xrows);
+        self.load_sequence(x);
         self.set_means(model, theta_int);
         self.emissions(model, x.nrows());
+    }
+
+    /// Copy a T × d sequence into both layouts.
+    pub(crate) fn load_sequence(&mut self, x: &DMatrix<f64>) {
+        rows_into(x, &mut self.xrows);
+        self.xcols.clear();
+        self.xcols.extend_from_slice(x.as_slice());
     }
 
     /// Means μ_i(θ) for an internal θ.
@@ -159,25 +168,47 @@ impl Workspace {
     }
 
     /// ℓ_t(j) = log N(x_t; μ_j, Σ_j) for the loaded sequence and means.
+    ///
+    /// For each state, the forward substitution `z = L⁻¹(x_t − μ_j)` runs for all frames at
+    /// once, coordinate by coordinate, so the inner loops run over contiguous frames (they
+    /// vectorise and have no loop-carried dependency). Per element the arithmetic is exactly the
+    /// frame-by-frame substitution.
     pub(crate) fn emissions(&mut self, model: &Phmm, t_len: usize) {
         let (n, d) = (model.n, model.d);
         resize(&mut self.ll, t_len * n);
-        resize(&mut self.r, d);
-        resize(&mut self.z, d);
-        for t in 0..t_len {
-            let x = &self.xrows[t * d..(t + 1) * d];
-            for j in 0..n {
-                let mu = &self.means[j * d..(j + 1) * d];
-                for k in 0..d {
-                    self.r[k] = x[k] - mu[k];
+        resize(&mut self.zcols, d * t_len);
+        resize(&mut self.acc, t_len);
+        for j in 0..n {
+            let lp = &model.chol_packed[j];
+            let inv_diag = &model.chol_inv_diag[j];
+            let mu = &self.means[j * d..(j + 1) * d];
+            self.acc.fill(0.0);
+            let mut off = 0;
+            for k in 0..d {
+                let (done, rest) = self.zcols.split_at_mut(k * t_len);
+                let zk = &mut rest[..t_len];
+                let xk = &self.xcols[k * t_len..(k + 1) * t_len];
+                let m = mu[k];
+                for (z, x) in zk.iter_mut().zip(xk) {
+                    *z = x - m;
                 }
-                let m2 = mahalanobis_packed(
-                    &model.chol_packed[j],
-                    &model.chol_inv_diag[j],
-                    &self.r,
-                    &mut self.z,
-                );
-                self.ll[t * n + j] = model.log_norm[j] - 0.5 * m2;
+                for c in 0..k {
+                    let l = lp[off + c];
+                    let zc = &done[c * t_len..(c + 1) * t_len];
+                    for (z, y) in zk.iter_mut().zip(zc) {
+                        *z -= l * y;
+                    }
+                }
+                let inv = inv_diag[k];
+                for (z, a) in zk.iter_mut().zip(self.acc.iter_mut()) {
+                    *z *= inv;
+                    *a += *z * *z;
+                }
+                off += k + 1;
+            }
+            let ln = model.log_norm[j];
+            for (t, a) in self.acc.iter().enumerate() {
+                self.ll[t * n + j] = ln - 0.5 * a;
             }
         }
     }

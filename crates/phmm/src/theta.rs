@@ -4,7 +4,7 @@
 use nalgebra::{DMatrix, DVector};
 
 use crate::PhmmError;
-use crate::inference::{Workspace, check_sequence, check_theta, rows_into};
+use crate::inference::{Workspace, check_sequence, check_theta};
 use crate::linalg::{cholesky_lower, solve_lower_in_place, solve_upper_t_in_place};
 use crate::model::Phmm;
 
@@ -144,7 +144,7 @@ impl Phmm {
         }
         let kernel = ThetaKernel::new(self);
         let mut ws = Workspace::default();
-        rows_into(x, &mut ws.xrows);
+        ws.load_sequence(x);
         let mut best: Option<(f64, RunResult)> = None;
         for s in starts {
             let run = self.theta_em_run(&mut ws, x.nrows(), &kernel, s, prior.as_ref(), opts)?;

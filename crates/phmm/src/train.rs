@@ -210,6 +210,8 @@ impl PhmmParams {
 struct TrainingSet {
     /// Frame-major copies.
     rows: Vec<Vec<f64>>,
+    /// Coordinate-major copies.
+    cols: Vec<Vec<f64>>,
     lens: Vec<usize>,
     /// Internal (centred, scaled) θ per sequence, p each.
     thetas: Vec<Vec<f64>>,
@@ -369,6 +371,7 @@ impl ValidPhmmParams {
             rows_into(x, &mut r);
             rows.push(r);
         }
+        let cols = seqs.iter().map(|x| x.as_slice().to_vec()).collect();
         let thetas_int = thetas
             .iter()
             .map(|t| (0..p).map(|k| (t[k] - centre[k]) / scale[k]).collect())
@@ -383,6 +386,7 @@ impl ValidPhmmParams {
         Ok((
             TrainingSet {
                 rows,
+                cols,
                 lens,
                 thetas: thetas_int,
                 d,
@@ -785,6 +789,8 @@ fn seq_stats(
     let t_len = set.lens[m];
     ws.xrows.clear();
     ws.xrows.extend_from_slice(&set.rows[m]);
+    ws.xcols.clear();
+    ws.xcols.extend_from_slice(&set.cols[m]);
     ws.set_means(model, &set.thetas[m]);
     ws.emissions(model, t_len);
     let log_p = ws.forward_backward(model, t_len, true);
