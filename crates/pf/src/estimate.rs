@@ -128,6 +128,8 @@ pub(crate) struct WeightedSet<'a> {
 #[derive(Debug, Clone)]
 pub(crate) struct Scratch {
     posterior: Vec<f64>,
+    /// Σ_{i∈a} w_i k_i per action (1-based k).
+    k_sum: Vec<f64>,
     histogram: Vec<f64>,
 }
 
@@ -135,6 +137,7 @@ impl Scratch {
     pub(crate) fn new(n_actions: usize) -> Self {
         Self {
             posterior: vec![0.0; n_actions],
+            k_sum: vec![0.0; n_actions],
             histogram: vec![0.0; HISTOGRAM_BINS * HISTOGRAM_BINS],
         }
     }
@@ -142,11 +145,12 @@ impl Scratch {
 
 #[inline]
 fn bin(u: f64) -> usize {
-    let b = ((u + 1.0) * 0.5 * HISTOGRAM_BINS as f64).floor();
-    if b.is_nan() || b < 0.0 {
-        0
-    } else {
+    let b = (u + 1.0) * 0.5 * HISTOGRAM_BINS as f64;
+    // Truncation is floor for b ≥ 0; NaN and negatives go to the first bin.
+    if b >= 0.0 {
         (b as usize).min(HISTOGRAM_BINS - 1)
+    } else {
+        0
     }
 }
 
@@ -167,15 +171,15 @@ pub(crate) fn compute(
     // Moments relative to the first particle's θ: exact zeros when every θ is the same.
     let r0 = set.states.first().map_or([0.0; 2], |s| s.theta);
     let (mut su, mut sv) = (0.0, 0.0);
-    let (mut mean_k, mut progress) = (0.0, 0.0);
+    let k_sum = &mut scratch.k_sum;
+    k_sum.clear();
+    k_sum.resize(n_actions, 0.0);
     let mut sum_w2 = 0.0;
     for (s, &w) in set.states.iter().zip(set.weights) {
         post[s.action] += w;
         su += w * (s.theta[0] - r0[0]);
         sv += w * (s.theta[1] - r0[1]);
-        let k1 = (s.k + 1) as f64;
-        mean_k += w * k1;
-        progress += w * k1 / set.n_states[s.action] as f64;
+        k_sum[s.action] += w * (s.k + 1) as f64;
         sum_w2 += w * w;
         scratch.histogram[bin(s.theta[1]) * HISTOGRAM_BINS + bin(s.theta[0])] += w;
     }
@@ -201,7 +205,7 @@ pub(crate) fn compute(
     let (du_mean, dv_mean) = (su / total, sv / total);
     let (mu_u, mu_v) = (r0[0] + du_mean, r0[1] + dv_mean);
     let (mut cuu, mut cuv, mut cvv) = (0.0, 0.0, 0.0);
-    let (mut mu_a, mut mv_a, mut wa, mut prog_a) = (0.0, 0.0, 0.0, 0.0);
+    let (mut mu_a, mut mv_a, mut wa) = (0.0, 0.0, 0.0);
     for (s, &w) in set.states.iter().zip(set.weights) {
         let du = (s.theta[0] - r0[0]) - du_mean;
         let dv = (s.theta[1] - r0[1]) - dv_mean;
@@ -212,7 +216,6 @@ pub(crate) fn compute(
             wa += w;
             mu_a += w * s.theta[0];
             mv_a += w * s.theta[1];
-            prog_a += w * (s.k + 1) as f64 / set.n_states[s.action] as f64;
         }
     }
     let [hx, hy] = set.region.half_extents;
@@ -274,9 +277,18 @@ pub(crate) fn compute(
         } else {
             0.0
         },
-        mean_k: mean_k / total,
-        progress: progress / total,
-        map_action_progress: if wa > 0.0 { prog_a / wa } else { 0.0 },
+        mean_k: k_sum.iter().sum::<f64>() / total,
+        progress: k_sum
+            .iter()
+            .zip(set.n_states)
+            .map(|(k, n)| k / *n as f64)
+            .sum::<f64>()
+            / total,
+        map_action_progress: if wa > 0.0 {
+            k_sum[map_action] / set.n_states[map_action] as f64 / wa
+        } else {
+            0.0
+        },
         best_particle: best,
         best_log_likelihood: set.log_likelihoods[best],
         best_action: set.states[best].action,

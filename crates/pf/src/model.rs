@@ -39,6 +39,8 @@ pub(crate) struct ActionCache {
     weights: Vec<[f64; D * P]>,
     /// Row-major packed lower triangle.
     chol: Vec<[f64; TRI]>,
+    /// σ(k) of the cooling schedule at each 0-based state (SPEC's k = index + 1).
+    sigma: Vec<f64>,
 }
 
 fn finite(action: usize, what: &str, v: f64) -> Result<f64, PfError> {
@@ -53,7 +55,13 @@ fn finite(action: usize, what: &str, v: f64) -> Result<f64, PfError> {
 }
 
 impl ActionCache {
-    pub(crate) fn from_phmm(action: usize, m: &Phmm) -> Result<Self, PfError> {
+    /// The cache of action `action`'s model, with the cooling schedule σ₀·ratio^(k/N) tabulated.
+    pub(crate) fn from_phmm(
+        action: usize,
+        m: &Phmm,
+        sigma0: f64,
+        end_ratio: f64,
+    ) -> Result<Self, PfError> {
         if m.dim() != D || m.theta_dim() != P {
             return Err(PfError::ModelShape {
                 action,
@@ -131,7 +139,7 @@ impl ActionCache {
             weights.push(aa);
             chol.push(ll);
         }
-        Ok(Self {
+        let mut cache = Self {
             n,
             stride,
             trans_cum,
@@ -139,7 +147,18 @@ impl ActionCache {
             bias,
             weights,
             chol,
-        })
+            sigma: vec![0.0; n],
+        };
+        for (i, s) in cache.sigma.iter_mut().enumerate() {
+            *s = crate::cooling_sigma((i + 1) as f64, n, sigma0, end_ratio);
+        }
+        Ok(cache)
+    }
+
+    /// σ at 0-based state `k`.
+    #[inline]
+    pub(crate) fn sigma(&self, k: usize) -> f64 {
+        self.sigma[k]
     }
 
     /// Draw the successor of 0-based state `k` from its banded row and exit probability.

@@ -11,7 +11,7 @@ use crate::resample::{Resampler, effective_sample_size, normalise_log_weights};
 use crate::rng::{DOMAIN_PARTICLE, DOMAIN_RESAMPLE, stream};
 use crate::{
     ActionState, Boundary, CloudParticle, Estimate, Grammar, KInit, ObservationModel, PfError,
-    PoseSampling, ResampleWhen, TrackerConfig, cooling_sigma,
+    PoseSampling, ResampleWhen, TrackerConfig,
 };
 
 /// Particles per rayon task: enough work per task to amortise scheduling.
@@ -75,12 +75,7 @@ impl Kernel<'_> {
             }
         }
         let c = self.config;
-        let sigma = cooling_sigma(
-            (s.k + 1) as f64,
-            self.models[s.action].n,
-            c.sigma0,
-            c.sigma_end_ratio,
-        );
+        let sigma = self.models[s.action].sigma(s.k);
         for t in &mut s.theta {
             let e: f64 = rng.sample(rand_distr::StandardNormal);
             *t = sigma.mul_add(e, *t);
@@ -182,7 +177,7 @@ impl Tracker {
         let models = models
             .into_iter()
             .enumerate()
-            .map(|(a, m)| ActionCache::from_phmm(a, m))
+            .map(|(a, m)| ActionCache::from_phmm(a, m, config.sigma0, config.sigma_end_ratio))
             .collect::<Result<Vec<_>, _>>()?;
         if models.is_empty() {
             return Err(PfError::NoModels);
@@ -276,20 +271,30 @@ impl Tracker {
             frame,
         };
         let first = self.frame == 0;
-        self.states
-            .par_iter_mut()
-            .zip(self.samples.par_chunks_mut(s))
-            .enumerate()
-            .with_min_len(MIN_PARTICLES_PER_TASK)
-            .for_each(|(i, (state, poses))| {
-                let mut rng = stream(seed, DOMAIN_PARTICLE, kernel.frame, i as u64);
-                if first {
-                    *state = kernel.init(&mut rng);
-                } else {
-                    kernel.propagate(state, &mut rng);
-                }
-                kernel.generate(state, &mut rng, obs, poses);
-            });
+        let particle = |(i, (state, poses)): (usize, (&mut ActionState, &mut [[f64; D]]))| {
+            let mut rng = stream(seed, DOMAIN_PARTICLE, kernel.frame, i as u64);
+            if first {
+                *state = kernel.init(&mut rng);
+            } else {
+                kernel.propagate(state, &mut rng);
+            }
+            kernel.generate(state, &mut rng, obs, poses);
+        };
+        // Same per-particle streams either way, so the result does not depend on this choice.
+        if m < 2 * MIN_PARTICLES_PER_TASK || rayon::current_num_threads() == 1 {
+            self.states
+                .iter_mut()
+                .zip(self.samples.chunks_mut(s))
+                .enumerate()
+                .for_each(particle);
+        } else {
+            self.states
+                .par_iter_mut()
+                .zip(self.samples.par_chunks_mut(s))
+                .enumerate()
+                .with_min_len(MIN_PARTICLES_PER_TASK)
+                .for_each(particle);
+        }
 
         // §3.5 weighting.
         obs.log_likelihoods(&self.samples, &mut self.sample_ll);
@@ -479,8 +484,13 @@ mod tests {
             .iter()
             .enumerate()
             .map(|(a, (_, shape))| {
-                ActionCache::from_phmm(a, &synthetic::action_model(shape, n, exit, 0.015).unwrap())
-                    .unwrap()
+                ActionCache::from_phmm(
+                    a,
+                    &synthetic::action_model(shape, n, exit, 0.015).unwrap(),
+                    0.4,
+                    1.0 / 16.0,
+                )
+                .unwrap()
             })
             .collect()
     }
@@ -490,7 +500,7 @@ mod tests {
     fn timing_follows_the_transition_row() {
         let n = 8;
         let phmm = synthetic::action_model(&SHAPES[0].1, n, 0.2, 0.015).unwrap();
-        let cache = ActionCache::from_phmm(0, &phmm).unwrap();
+        let cache = ActionCache::from_phmm(0, &phmm, 0.4, 1.0 / 16.0).unwrap();
         let mut rng = Pcg64Mcg::seed_from_u64(3);
         let draws = 200_000;
         for k in [0, 5, n - 2, n - 1] {
@@ -625,7 +635,7 @@ mod tests {
         let mut shape = SHAPES[2].1;
         shape.lift = 0.07;
         let phmm = synthetic::action_model(&shape, 10, 0.2, 0.02).unwrap();
-        let cache = ActionCache::from_phmm(0, &phmm).unwrap();
+        let cache = ActionCache::from_phmm(0, &phmm, 0.4, 1.0 / 16.0).unwrap();
         let region = synthetic::table_region();
         let u = [0.6, -0.3];
         let theta_m = region.to_metres(u);
