@@ -48,10 +48,63 @@ pub(crate) struct Workspace {
     pub gamma: Vec<f64>,
     /// Σ_t ξ_t(i, i+k), N × (J+1).
     pub xi: Vec<f64>,
+    /// The same by band diagonal, (J+1) × N, while accumulating.
+    xi_diag: Vec<f64>,
 }
 
+/// `exp(x)` for `x ≤ 0` (the shifted emission densities), inlined and branch-free so the
+/// per-frame loop over states vectorises and needs no libm call. Range reduction
+/// `x = k ln 2 + r`, `|r| ≤ ln 2 / 2` (k rounded with the 1.5·2^52 trick, a two-part ln 2),
+/// the degree-13 Taylor polynomial (truncation error < 1e-17 relative) and an exact scaling by
+/// `2^k`. Agrees with `f64::exp` to a few ulp above `e^−707`; below, where `exp` would be
+/// subnormal (< 1e-307 of the frame's largest density), it returns 0, as it does for NaN.
+#[inline]
+pub(crate) fn exp_nonpositive(x: f64) -> f64 {
+    const LN2_HI: f64 = 0.693_147_180_369_123_8;
+    const LN2_LO: f64 = 1.908_214_929_270_587_7e-10;
+    const INV_LN2: f64 = std::f64::consts::LOG2_E;
+    const MAGIC: f64 = 6_755_399_441_055_744.0; // 1.5·2^52
+    const LOWEST: f64 = -707.0;
+    let xc = x.max(LOWEST);
+    let kd = xc * INV_LN2 + MAGIC;
+    let k = kd - MAGIC;
+    let r = (xc - k * LN2_HI) - k * LN2_LO;
+    // Horner on 1 + r + r²/2! + … + r¹³/13!.
+    let mut p = 1.0 / 6_227_020_800.0;
+    for c in [
+        1.0 / 479_001_600.0,
+        1.0 / 39_916_800.0,
+        1.0 / 3_628_800.0,
+        1.0 / 362_880.0,
+        1.0 / 40_320.0,
+        1.0 / 5_040.0,
+        1.0 / 720.0,
+        1.0 / 120.0,
+        1.0 / 24.0,
+        1.0 / 6.0,
+        0.5,
+        1.0,
+        1.0,
+    ] {
+        p = p * r + c;
+    }
+    // kd's low bits hold k (two's complement offset from MAGIC); 2^k has exponent field k+1023.
+    let kbits = kd
+        .to_bits()
+        .wrapping_sub(MAGIC.to_bits())
+        .wrapping_add(1023);
+    let scaled = p * f64::from_bits(kbits << 52);
+    if x > LOWEST { scaled } else { 0.0 }
+}
+
+/// Set the length to `len`, all zeros.
 fn resize(v: &mut Vec<f64>, len: usize) {
     v.clear();
+    v.resize(len, 0.0);
+}
+
+/// Set the length to `len` without clearing (for buffers that are fully overwritten).
+fn grow(v: &mut Vec<f64>, len: usize) {
     v.resize(len, 0.0);
 }
 
@@ -161,7 +214,7 @@ impl Workspace {
     /// Means μ_i(θ) for an internal θ.
     pub(crate) fn set_means(&mut self, model: &Phmm, theta_int: &[f64]) {
         let (n, d) = (model.n, model.d);
-        resize(&mut self.means, n * d);
+        grow(&mut self.means, n * d);
         for i in 0..n {
             model.mean_internal_into(i, theta_int, &mut self.means[i * d..(i + 1) * d]);
         }
@@ -173,11 +226,12 @@ impl Workspace {
     /// once, coordinate by coordinate, so the inner loops run over contiguous frames (they
     /// vectorise and have no loop-carried dependency). Per element the arithmetic is exactly the
     /// frame-by-frame substitution.
+    #[inline(never)]
     pub(crate) fn emissions(&mut self, model: &Phmm, t_len: usize) {
         let (n, d) = (model.n, model.d);
-        resize(&mut self.ll, t_len * n);
-        resize(&mut self.zcols, d * t_len);
-        resize(&mut self.acc, t_len);
+        grow(&mut self.ll, t_len * n);
+        grow(&mut self.zcols, d * t_len);
+        grow(&mut self.acc, t_len);
         for j in 0..n {
             let lp = &model.chol_packed[j];
             let inv_diag = &model.chol_inv_diag[j];
@@ -233,53 +287,49 @@ impl Workspace {
 
     /// Scaled forward pass (SPEC §1.2 "scaled variant", with the shift taken over reachable states).
     /// Returns `None` if a normaliser under/overflows.
+    #[inline(never)]
     fn forward_scaled(&mut self, model: &Phmm, t_len: usize) -> Option<f64> {
-        let (n, w) = (model.n, model.j + 1);
-        resize(&mut self.bt, t_len * n);
-        resize(&mut self.alpha, t_len * n);
-        resize(&mut self.scale, t_len);
-        resize(&mut self.pred, n);
+        let (n, jmax) = (model.n, model.j);
+        grow(&mut self.bt, t_len * n);
+        grow(&mut self.alpha, t_len * n);
+        grow(&mut self.scale, t_len);
+        grow(&mut self.pred, n);
         let mut log_p = 0.0;
         self.pred.copy_from_slice(&model.start);
         for t in 0..t_len {
             if t > 0 {
-                self.pred.fill(0.0);
+                // pred(j) = Σ_{i ∈ pred(j)} α̂_{t−1}(i) a_ij, summed over ascending i.
+                // pred(j) = Σ_{i ∈ pred(j)} α̂_{t−1}(i) a_ij, one band diagonal at a time; the
+                // far diagonal first, so each pred(j) adds its terms in ascending i.
                 let prev = &self.alpha[(t - 1) * n..t * n];
-                for i in 0..n {
-                    let a = prev[i];
-                    if a == 0.0 {
-                        continue;
-                    }
-                    let row = &model.trans[i * w..i * w + w.min(n - i)];
-                    for (k, &aij) in row.iter().enumerate() {
-                        self.pred[i + k] += a * aij;
+                self.pred.fill(0.0);
+                for k in (0..=jmax.min(n - 1)).rev() {
+                    let diag = &model.band_in[k * n + k..(k + 1) * n];
+                    for ((p, a), d) in self.pred[k..].iter_mut().zip(prev).zip(diag) {
+                        *p += a * d;
                     }
                 }
             }
             let ll = &self.ll[t * n..(t + 1) * n];
             let mut m = f64::NEG_INFINITY;
-            for j in 0..n {
-                if self.pred[j] > 0.0 && ll[j] > m {
-                    m = ll[j];
+            for (&p, &l) in self.pred.iter().zip(ll) {
+                if p > 0.0 && l > m {
+                    m = l;
                 }
             }
             if !m.is_finite() {
                 return None;
             }
             let bt = &mut self.bt[t * n..(t + 1) * n];
+            for ((b, &p), &l) in bt.iter_mut().zip(&self.pred).zip(ll) {
+                let e = exp_nonpositive(l - m);
+                *b = if p > 0.0 { e } else { 0.0 };
+            }
             let al = &mut self.alpha[t * n..(t + 1) * n];
             let mut c = 0.0;
-            for j in 0..n {
-                let p = self.pred[j];
-                let (b, a) = if p > 0.0 {
-                    let b = (ll[j] - m).exp();
-                    (b, b * p)
-                } else {
-                    (0.0, 0.0)
-                };
-                bt[j] = b;
-                al[j] = a;
-                c += a;
+            for ((a, &b), &p) in al.iter_mut().zip(bt.iter()).zip(&self.pred) {
+                *a = b * p;
+                c += *a;
             }
             if !(c > TINY && c.is_finite()) {
                 return None;
@@ -306,6 +356,7 @@ impl Workspace {
         Some(log_p + s_e.ln())
     }
 
+    #[inline(never)]
     fn forward_backward_scaled(
         &mut self,
         model: &Phmm,
@@ -314,9 +365,9 @@ impl Workspace {
     ) -> Option<f64> {
         let log_p = self.forward_scaled(model, t_len)?;
         let (n, w) = (model.n, model.j + 1);
-        resize(&mut self.beta, t_len * n);
-        resize(&mut self.u, n);
-        resize(&mut self.gamma, t_len * n);
+        grow(&mut self.beta, t_len * n);
+        grow(&mut self.u, n);
+        grow(&mut self.gamma, t_len * n);
         if want_xi {
             resize(&mut self.xi, n * w);
         }
@@ -337,33 +388,50 @@ impl Workspace {
                 }
             }
         }
+        if want_xi {
+            resize(&mut self.xi_diag, n * w);
+        }
         for t in (0..t_len - 1).rev() {
             let inv_c = 1.0 / self.scale[t + 1];
             let nb = (t + 1) * n;
-            for j in 0..n {
-                self.u[j] = self.bt[nb + j] * self.beta[nb + j] * inv_c;
+            for ((u, b), bt) in self
+                .u
+                .iter_mut()
+                .zip(&self.beta[nb..nb + n])
+                .zip(&self.bt[nb..nb + n])
+            {
+                *u = bt * b * inv_c;
             }
             let cur = t * n;
-            for i in 0..n {
-                let kmax = w.min(n - i);
-                let row = &model.trans[i * w..i * w + kmax];
-                let u = &self.u[i..i + kmax];
-                let mut b = 0.0;
-                for k in 0..kmax {
-                    b += row[k] * u[k];
+            // β̂_t(i) = Σ_k a_{i,i+k} u(i+k), one band diagonal at a time (contiguous, vectorises;
+            // per element the terms are still added in ascending k).
+            let beta_t = &mut self.beta[cur..cur + n];
+            beta_t.fill(0.0);
+            for k in 0..w.min(n) {
+                let diag = &model.band_out[k * n..k * n + (n - k)];
+                for ((b, a), u) in beta_t[..n - k].iter_mut().zip(diag).zip(&self.u[k..]) {
+                    *b += a * u;
                 }
-                if !(b < HUGE) {
-                    return None;
-                }
-                self.beta[cur + i] = b;
-                if want_xi {
-                    let a = self.alpha[cur + i];
-                    if a > 0.0 {
-                        let xi = &mut self.xi[i * w..i * w + kmax];
-                        for k in 0..kmax {
-                            xi[k] += a * row[k] * u[k];
-                        }
+            }
+            if beta_t.iter().any(|b| !(*b < HUGE)) {
+                return None;
+            }
+            if want_xi {
+                let alpha_t = &self.alpha[cur..cur + n];
+                for k in 0..w.min(n) {
+                    let diag = &model.band_out[k * n..k * n + (n - k)];
+                    let xi = &mut self.xi_diag[k * n..k * n + (n - k)];
+                    for (((x, al), a), u) in xi.iter_mut().zip(alpha_t).zip(diag).zip(&self.u[k..])
+                    {
+                        *x += al * a * u;
                     }
+                }
+            }
+        }
+        if want_xi {
+            for i in 0..n {
+                for k in 0..w {
+                    self.xi[i * w + k] = self.xi_diag[k * n + i];
                 }
             }
         }
@@ -645,9 +713,28 @@ fn finite_or_zero(lp: f64) -> Result<f64, PhmmError> {
 }
 
 #[cfg(test)]
+#[allow(clippy::float_cmp)] // exact values are the point of these checks
 pub(crate) mod tests {
     //! Scaled vs log-space agreement; brute-force checks live in tests/conformance.rs.
     use super::*;
+
+    #[test]
+    fn fast_exp_matches_libm() {
+        let mut worst = 0.0f64;
+        let mut x = 0.0;
+        while x > -760.0 {
+            let (a, b) = (exp_nonpositive(x), x.exp());
+            if x > -707.0 {
+                worst = worst.max(((a - b) / b).abs());
+            } else {
+                assert!(a == 0.0 && b < 1e-307, "{x}: {a} vs {b}");
+            }
+            x -= 0.013_7;
+        }
+        assert!(worst < 1e-15, "max relative error {worst}");
+        assert!(exp_nonpositive(0.0) == 1.0 && exp_nonpositive(-800.0) == 0.0);
+        assert!(exp_nonpositive(f64::NAN) == 0.0);
+    }
 
     #[test]
     fn lse_handles_all_neg_inf() {

@@ -80,6 +80,10 @@ pub struct Phmm {
     pub(crate) chol_packed: Vec<Vec<f64>>,
     pub(crate) chol_inv_diag: Vec<Vec<f64>>,
     pub(crate) log_norm: Vec<f64>,
+    /// Derived: the band by diagonal, (J+1) × N: `band_in[k*N + j] = a_{j−k, j}` (0 if k > j)
+    /// and `band_out[k*N + i] = a_{i, i+k}` (0 past the last state).
+    pub(crate) band_in: Vec<f64>,
+    pub(crate) band_out: Vec<f64>,
     /// Distinct training θ (internal units), the starting points of multi-start θ estimation.
     pub(crate) training_thetas: Vec<Vec<f64>>,
 }
@@ -478,6 +482,14 @@ impl Phmm {
             chol_packed.push(packed);
             cholesky.push(l);
         }
+        let mut band_in = vec![0.0; n * w];
+        let mut band_out = vec![0.0; n * w];
+        for k in 0..w {
+            for j in k..n {
+                band_in[k * n + j] = trans[(j - k) * w + k];
+                band_out[k * n + (j - k)] = trans[(j - k) * w + k];
+            }
+        }
         Ok(Phmm {
             n,
             d,
@@ -497,6 +509,8 @@ impl Phmm {
             chol_packed,
             chol_inv_diag,
             log_norm,
+            band_in,
+            band_out,
             training_thetas: Vec::new(),
         })
     }

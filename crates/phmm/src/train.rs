@@ -583,6 +583,28 @@ impl ValidPhmmParams {
         results.into_iter().collect()
     }
 
+    /// Σ_m log P(X^m) by forward passes (parallel, summed in sequence order).
+    fn total_log_likelihood(model: &Phmm, set: &TrainingSet) -> Result<f64, PhmmError> {
+        let lps: Vec<f64> = (0..set.rows.len())
+            .into_par_iter()
+            .map_init(Workspace::default, |ws, m| {
+                ws.xcols.clear();
+                ws.xcols.extend_from_slice(&set.cols[m]);
+                ws.set_means(model, &set.thetas[m]);
+                ws.emissions(model, set.lens[m]);
+                ws.forward_only(model, set.lens[m])
+            })
+            .collect();
+        let mut total = 0.0;
+        for (index, lp) in lps.into_iter().enumerate() {
+            if !lp.is_finite() {
+                return Err(PhmmError::ZeroLikelihood { index });
+            }
+            total += lp;
+        }
+        Ok(total)
+    }
+
     fn baum_welch(
         &self,
         mut model: Phmm,
@@ -595,8 +617,13 @@ impl ValidPhmmParams {
         let global_scale =
             model.covariances.iter().map(DMatrix::trace).sum::<f64>() / (model.n * model.d) as f64;
         loop {
-            let stats = Self::e_step(&model, set)?;
-            let ll: f64 = stats.iter().map(|s| s.log_p).sum();
+            // After the last M-step only the likelihood is needed: forward passes only.
+            let (ll, stats) = if iterations >= prm.max_iterations {
+                (Self::total_log_likelihood(&model, set)?, None)
+            } else {
+                let stats = Self::e_step(&model, set)?;
+                (stats.iter().map(|s| s.log_p).sum(), Some(stats))
+            };
             if let Some(&prev) = lls.last() {
                 let change: f64 = (ll - prev) / set.total_frames as f64;
                 if change.abs() < prm.tolerance {
@@ -606,9 +633,9 @@ impl ValidPhmmParams {
                 }
             }
             lls.push(ll);
-            if iterations >= prm.max_iterations {
+            let Some(stats) = stats else {
                 break;
-            }
+            };
             model = self.m_step(&model, set, &stats, global_scale)?;
             iterations += 1;
         }
@@ -784,7 +811,7 @@ fn seq_stats(
     m: usize,
     ws: &mut Workspace,
 ) -> Result<SeqStats, PhmmError> {
-    let (n, d, w) = (model.n, model.d, model.j + 1);
+    let (n, d) = (model.n, model.d);
     let tri = d * (d + 1) / 2;
     let t_len = set.lens[m];
     ws.xrows.clear();
@@ -806,6 +833,14 @@ fn seq_stats(
         sum_y: vec![0.0; n * d],
         outer: vec![0.0; n * tri],
     };
+    accumulate(ws, &mut st, n, d, t_len);
+    Ok(st)
+}
+
+/// Σ_t γ_t(i) y and Σ_t γ_t(i) y yᵀ with y = x_t − μ_i (packed lower triangle).
+#[inline(never)]
+fn accumulate(ws: &Workspace, st: &mut SeqStats, n: usize, d: usize, t_len: usize) {
+    let tri = d * (d + 1) / 2;
     let mut y = vec![0.0; d];
     for t in 0..t_len {
         let x = &ws.xrows[t * d..(t + 1) * d];
@@ -835,8 +870,6 @@ fn seq_stats(
             }
         }
     }
-    let _ = w;
-    Ok(st)
 }
 
 fn add_into(acc: &mut [f64], v: &[f64]) {
