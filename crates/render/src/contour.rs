@@ -123,9 +123,48 @@ impl Prepared {
         }
     }
 
+    /// Whether `x` is more than [`INSIDE_TOL`] pixels inside the part (no square roots).
+    #[inline]
+    fn deep_inside(&self, x: Vector2<f64>) -> bool {
+        let within = |d2: f64, r: f64| r > INSIDE_TOL && d2 < (r - INSIDE_TOL) * (r - INSIDE_TOL);
+        match *self {
+            Self::Circle { c, r } => within((x - c).norm_squared(), r),
+            Self::Capsule {
+                c0,
+                c1,
+                r0,
+                r1,
+                len,
+                d,
+                n,
+                sin_a,
+                cos_a,
+            } => {
+                let rel = x - c0;
+                let s = rel.dot(&d);
+                if s < r0 * sin_a {
+                    within(rel.norm_squared(), r0)
+                } else if s > len + r1 * sin_a {
+                    within((x - c1).norm_squared(), r1)
+                } else {
+                    s * sin_a + rel.dot(&n).abs() * cos_a < r0 - INSIDE_TOL
+                }
+            }
+            Self::Ellipse { c, a, b, ea, eb } => {
+                if b <= INSIDE_TOL {
+                    return false;
+                }
+                let rel = x - c;
+                let (xa, xb) = (rel.dot(&ea) / a, rel.dot(&eb) / b);
+                let k = 1.0 - INSIDE_TOL / b;
+                xa * xa + xb * xb < k * k
+            }
+        }
+    }
+
     /// Signed distance (exact for discs and capsules, approximate for ellipses), negative
     /// inside.
-    #[inline]
+    #[cfg(test)]
     fn signed_distance(&self, x: Vector2<f64>) -> f64 {
         match *self {
             Self::Circle { c, r } => (x - c).norm() - r,
@@ -462,7 +501,7 @@ pub(crate) fn analytic_contour<F: FnMut(f64, f64)>(
                 return;
             }
             for (k, other) in parts.iter().enumerate() {
-                if k != i && other.signed_distance(x) < -INSIDE_TOL {
+                if k != i && other.deep_inside(x) {
                     return;
                 }
             }
@@ -557,15 +596,37 @@ pub(crate) fn raster_contour<F: FnMut(usize, usize)>(
     scratch.builder = Some(path.clear());
     let data = mask.data_mut();
     let (mw, mh) = (mw as usize, mh as usize);
+    let word = |s: &[u8], at: usize| {
+        let mut b = [0u8; 8];
+        b.copy_from_slice(&s[at..at + 8]);
+        u64::from_le_bytes(b)
+    };
     for j in 1..mh - 1 {
         let up = &data[(j - 1) * stride..(j - 1) * stride + mw];
         let cur = &data[j * stride..j * stride + mw];
         let dn = &data[(j + 1) * stride..(j + 1) * stride + mw];
         let v = (oy + j as i64) as usize;
-        for i in 1..mw - 1 {
+        // Eight pixels at a time: a non-AA fill writes only 0 and 255, so the boundary bytes
+        // are `cur & !(left & right & up & down)`; all-empty and all-interior words are skipped.
+        let mut i = 1;
+        while i + 9 <= mw {
+            let c = word(cur, i);
+            if c != 0 {
+                let all = word(cur, i - 1) & word(cur, i + 1) & word(up, i) & word(dn, i);
+                let mut b = c & !all;
+                while b != 0 {
+                    let k = (b.trailing_zeros() / 8) as usize;
+                    visit((ox + (i + k) as i64) as usize, v);
+                    b &= !(0xFFu64 << (8 * k));
+                }
+            }
+            i += 8;
+        }
+        while i < mw - 1 {
             if cur[i] != 0 && (cur[i - 1] == 0 || cur[i + 1] == 0 || up[i] == 0 || dn[i] == 0) {
                 visit((ox + i as i64) as usize, v);
             }
+            i += 1;
         }
     }
     if clear[0] < clear[2] {

@@ -135,6 +135,7 @@ pub struct EdgeWorkspace {
     sv: Vec<f32>,
     dv: Vec<f32>,
     pad: Vec<f32>,
+    rows: Vec<usize>,
     kernel: Vec<f32>,
     kernel_sigma: f32,
     out: EdgeImage,
@@ -318,7 +319,7 @@ impl EdgeWorkspace {
         let k = &self.kernel[..];
         let r = k.len() - 1;
         self.tmp.resize(w * h, 0.0);
-        self.pad.resize(w + 2 * r, 0.0);
+        self.pad.resize(w + 2 * r + BLOCK, 0.0);
         for (src, dst) in self.mag.chunks_exact(w).zip(self.tmp.chunks_exact_mut(w)) {
             let pad = &mut self.pad[..];
             pad[..r].fill(src[0]);
@@ -326,26 +327,23 @@ impl EdgeWorkspace {
             pad[r + w..].fill(src[w - 1]);
             let pad = &self.pad[..];
             let mut x = 0;
-            let mut chunks = dst.chunks_exact_mut(8);
+            let mut chunks = dst.chunks_exact_mut(BLOCK);
             for oc in &mut chunks {
-                let mut acc = [0f32; 8];
-                let c: &[f32; 8] = pad[x + r..x + r + 8].try_into().unwrap_or(&[0.0; 8]);
-                for i in 0..8 {
+                let win = &pad[x..x + 2 * r + BLOCK];
+                let mut acc = [0f32; BLOCK];
+                let c = block(win, r);
+                for i in 0..BLOCK {
                     acc[i] = k[0] * c[i];
                 }
                 for (j, &kj) in k.iter().enumerate().skip(1) {
-                    let a: &[f32; 8] = pad[x + r - j..x + r - j + 8]
-                        .try_into()
-                        .unwrap_or(&[0.0; 8]);
-                    let b: &[f32; 8] = pad[x + r + j..x + r + j + 8]
-                        .try_into()
-                        .unwrap_or(&[0.0; 8]);
-                    for i in 0..8 {
+                    let a = block(win, r - j);
+                    let b = block(win, r + j);
+                    for i in 0..BLOCK {
                         acc[i] += kj * (a[i] + b[i]);
                     }
                 }
                 oc.copy_from_slice(&acc);
-                x += 8;
+                x += BLOCK;
             }
             for o in chunks.into_remainder() {
                 let mut acc = k[0] * pad[x + r];
@@ -358,43 +356,59 @@ impl EdgeWorkspace {
         }
     }
 
-    /// Vertical pass `tmp → out`, borders clamped.
+    /// Vertical pass `tmp → out`, borders clamped. Blocks of 16 columns keep the accumulators
+    /// in registers across all taps.
     fn gauss_cols(&mut self, w: usize, h: usize) {
         let k = &self.kernel[..];
+        let r = k.len() - 1;
         let src = &self.tmp[..];
+        self.rows.resize(2 * r + 1, 0);
         for (y, dst) in self.out.data.chunks_exact_mut(w).enumerate() {
-            let row = |yy: usize| &src[yy * w..yy * w + w];
-            let centre = row(y);
+            // Row offsets of y−r … y+r (clamped), so the column loop does no index arithmetic.
+            for (t, o) in self.rows.iter_mut().enumerate() {
+                let yy = (y + t).saturating_sub(r).min(h - 1);
+                *o = yy * w;
+            }
+            let rows = &self.rows[..];
             let mut x = 0;
-            let mut chunks = dst.chunks_exact_mut(8);
+            let mut chunks = dst.chunks_exact_mut(BLOCK);
             for oc in &mut chunks {
-                let mut acc = [0f32; 8];
-                let c: &[f32; 8] = centre[x..x + 8].try_into().unwrap_or(&[0.0; 8]);
-                for i in 0..8 {
+                let mut acc = [0f32; BLOCK];
+                let c = block(src, rows[r] + x);
+                for i in 0..BLOCK {
                     acc[i] = k[0] * c[i];
                 }
                 for (j, &kj) in k.iter().enumerate().skip(1) {
-                    let up = row(y.saturating_sub(j));
-                    let dn = row((y + j).min(h - 1));
-                    let a: &[f32; 8] = up[x..x + 8].try_into().unwrap_or(&[0.0; 8]);
-                    let b: &[f32; 8] = dn[x..x + 8].try_into().unwrap_or(&[0.0; 8]);
-                    for i in 0..8 {
+                    let a = block(src, rows[r - j] + x);
+                    let b = block(src, rows[r + j] + x);
+                    for i in 0..BLOCK {
                         acc[i] += kj * (a[i] + b[i]);
                     }
                 }
                 oc.copy_from_slice(&acc);
-                x += 8;
+                x += BLOCK;
             }
             for o in chunks.into_remainder() {
-                let mut acc = k[0] * centre[x];
+                let mut acc = k[0] * src[rows[r] + x];
                 for (j, &kj) in k.iter().enumerate().skip(1) {
-                    acc += kj * (row(y.saturating_sub(j))[x] + row((y + j).min(h - 1))[x]);
+                    acc += kj * (src[rows[r - j] + x] + src[rows[r + j] + x]);
                 }
                 *o = acc;
                 x += 1;
             }
         }
     }
+}
+
+/// Columns per register block of the Gaussian passes.
+const BLOCK: usize = 16;
+
+/// `BLOCK` values of `s` from `at` as a fixed-size array (one bounds check).
+#[inline(always)]
+fn block(s: &[f32], at: usize) -> [f32; BLOCK] {
+    let mut out = [0f32; BLOCK];
+    out.copy_from_slice(&s[at..at + BLOCK]);
+    out
 }
 
 #[cfg(test)]
