@@ -1,3 +1,33 @@
-//! Python bindings of actrack (module `actrack._actrack`).
+//! Python bindings of actrack (module `actrack._actrack`, packaged by maturin as `actrack`).
 //!
-//! Not implemented yet: see the project's issue "The Python package".
+//! The Python package re-exports everything from `python/actrack/__init__.py`; the stubs are in
+//! `python/actrack/_actrack.pyi`. This crate holds no algorithm: each class or function wraps a
+//! Rust API of `actrack-phmm` or `actrack`, converts numpy arrays at the boundary
+//! ([`convert`]), maps errors to `actrack.ActrackError` (a `ValueError`) or
+//! `actrack.ActrackOSError` (an `OSError`) ([`errors`]), and releases the GIL around heavy work.
+//!
+//! Modules: [`models`] (`Hmm`, `Phmm`, `FitReport`, `ThetaEstimate`).
+
+// pyo3 extracts arguments as owned values (`PathBuf`, `PyRef`), so by-value parameters are the
+// binding convention here, not an oversight.
+#![allow(clippy::needless_pass_by_value)]
+
+use pyo3::prelude::*;
+
+pub mod convert;
+pub mod errors;
+pub mod models;
+
+/// The extension module `actrack._actrack`.
+#[pymodule]
+fn _actrack(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    let py = m.py();
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add("ActrackError", py.get_type::<errors::ActrackError>())?;
+    m.add("ActrackOSError", py.get_type::<errors::ActrackOSError>())?;
+    m.add_class::<models::PyHmm>()?;
+    m.add_class::<models::PyPhmm>()?;
+    m.add_class::<models::PyFitReport>()?;
+    m.add_class::<models::PyThetaEstimate>()?;
+    Ok(())
+}

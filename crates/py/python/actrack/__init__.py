@@ -1,0 +1,28 @@
+"""actrack: track a human arm in video by tracking the action it performs.
+
+numpy in, numpy out. The classes and functions are implemented in Rust (``actrack._actrack``);
+this package re-exports them.
+
+Errors: invalid input raises :class:`ActrackError` (a ``ValueError``); a file that cannot be read
+or written raises :class:`ActrackOSError` (an ``OSError``). Both carry the Rust message.
+"""
+
+from ._actrack import (
+    ActrackError,
+    ActrackOSError,
+    FitReport,
+    Hmm,
+    Phmm,
+    ThetaEstimate,
+    __version__,
+)
+
+__all__ = [
+    "ActrackError",
+    "ActrackOSError",
+    "FitReport",
+    "Hmm",
+    "Phmm",
+    "ThetaEstimate",
+    "__version__",
+]

@@ -1,0 +1,200 @@
+"""Type stubs of the extension module ``actrack._actrack`` (checked against the runtime by
+``crates/py/tests/test_stubs.py``)."""
+
+import os
+from typing import Literal, final
+
+import numpy as np
+import numpy.typing as npt
+
+__version__: str
+
+_F64 = npt.NDArray[np.float64]
+_I64 = npt.NDArray[np.int64]
+_ArrayLike = npt.ArrayLike
+_Path = str | os.PathLike[str]
+_EndMode = Literal["must_end", "free", "none"]
+_CovType = Literal["full", "diag"]
+
+class ActrackError(ValueError):
+    """Invalid input or model: bad shapes, non-finite values, inconsistent parameters, malformed files."""
+
+class ActrackOSError(OSError):
+    """A file could not be read or written (errno, strerror and filename are set)."""
+
+@final
+class FitReport:
+    """What a fit did: iterations, the log-likelihood history and whether it converged."""
+
+    @property
+    def iterations(self) -> int: ...
+    @property
+    def log_likelihoods(self) -> _F64: ...
+    @property
+    def converged(self) -> bool: ...
+
+@final
+class ThetaEstimate:
+    """The result of θ estimation: θ̂ (caller units), log P(X | θ̂), EM iterations and history."""
+
+    @property
+    def theta(self) -> _F64: ...
+    @property
+    def log_likelihood(self) -> float: ...
+    @property
+    def iterations(self) -> int: ...
+    @property
+    def history(self) -> _F64: ...
+
+@final
+class Hmm:
+    """A plain left-right Gaussian HMM (numpy in, numpy out)."""
+
+    @classmethod
+    def from_params(
+        cls,
+        startprob: _ArrayLike,
+        transmat: _ArrayLike,
+        means: _ArrayLike,
+        covars: _ArrayLike,
+        *,
+        exitprob: _ArrayLike | None = None,
+        max_jump: int | None = None,
+        end_mode: _EndMode | None = None,
+    ) -> Hmm: ...
+    @classmethod
+    def fit(
+        cls,
+        sequences: _ArrayLike,
+        *,
+        n_states: int | None = None,
+        max_jump: int = 3,
+        covariance_type: _CovType = "full",
+        end_mode: _EndMode = "must_end",
+        n_iter: int = 100,
+        tol: float = 0.0001,
+        cov_floor: float = 0.005,
+        min_occupancy: float | None = None,
+        transition_floor: float = 0.0,
+        learn_startprob: bool = False,
+        init: Hmm | None = None,
+    ) -> Hmm: ...
+    @classmethod
+    def load(cls, path: _Path) -> Hmm: ...
+    @classmethod
+    def from_json(cls, text: str) -> Hmm: ...
+    def save(self, path: _Path) -> None: ...
+    def to_json(self) -> str: ...
+    @property
+    def n_states(self) -> int: ...
+    @property
+    def dim(self) -> int: ...
+    @property
+    def max_jump(self) -> int: ...
+    @property
+    def end_mode(self) -> _EndMode: ...
+    @property
+    def covariance_type(self) -> _CovType: ...
+    @property
+    def startprob(self) -> _F64: ...
+    @property
+    def transmat(self) -> _F64: ...
+    @property
+    def exitprob(self) -> _F64: ...
+    @property
+    def means(self) -> _F64: ...
+    @property
+    def covars(self) -> _F64: ...
+    @property
+    def fit_report(self) -> FitReport | None: ...
+    def log_likelihood(self, x: _ArrayLike) -> float: ...
+    def posteriors(self, x: _ArrayLike) -> _F64: ...
+    def viterbi(self, x: _ArrayLike) -> tuple[_I64, float]: ...
+    def sample(self, *, length: int | None = None, seed: int = 0) -> tuple[_F64, _I64]: ...
+    def expected_trajectory(self, *, length: int | None = None) -> _F64: ...
+
+@final
+class Phmm:
+    """A linear parametric HMM: μ_i(θ) = mean_bias_i + mean_weights_i · θ."""
+
+    @classmethod
+    def from_params(
+        cls,
+        startprob: _ArrayLike,
+        transmat: _ArrayLike,
+        mean_bias: _ArrayLike,
+        mean_weights: _ArrayLike,
+        covars: _ArrayLike,
+        *,
+        exitprob: _ArrayLike | None = None,
+        max_jump: int | None = None,
+        end_mode: _EndMode | None = None,
+    ) -> Phmm: ...
+    @classmethod
+    def fit(
+        cls,
+        sequences: _ArrayLike,
+        thetas: _ArrayLike,
+        *,
+        n_states: int | None = None,
+        max_jump: int = 3,
+        covariance_type: _CovType = "full",
+        end_mode: _EndMode = "must_end",
+        n_iter: int = 100,
+        tol: float = 0.0001,
+        cov_floor: float = 0.005,
+        min_occupancy: float | None = None,
+        transition_floor: float = 0.0,
+        learn_startprob: bool = False,
+        init: Phmm | None = None,
+    ) -> Phmm: ...
+    @classmethod
+    def load(cls, path: _Path) -> Phmm: ...
+    @classmethod
+    def from_json(cls, text: str) -> Phmm: ...
+    def save(self, path: _Path) -> None: ...
+    def to_json(self) -> str: ...
+    @property
+    def n_states(self) -> int: ...
+    @property
+    def dim(self) -> int: ...
+    @property
+    def theta_dim(self) -> int: ...
+    @property
+    def max_jump(self) -> int: ...
+    @property
+    def end_mode(self) -> _EndMode: ...
+    @property
+    def covariance_type(self) -> _CovType: ...
+    @property
+    def startprob(self) -> _F64: ...
+    @property
+    def transmat(self) -> _F64: ...
+    @property
+    def exitprob(self) -> _F64: ...
+    @property
+    def mean_bias(self) -> _F64: ...
+    @property
+    def mean_weights(self) -> _F64: ...
+    @property
+    def covars(self) -> _F64: ...
+    @property
+    def fit_report(self) -> FitReport | None: ...
+    def means(self, theta: _ArrayLike) -> _F64: ...
+    def log_likelihood(self, x: _ArrayLike, theta: _ArrayLike) -> float: ...
+    def posteriors(self, x: _ArrayLike, theta: _ArrayLike) -> _F64: ...
+    def viterbi(self, x: _ArrayLike, theta: _ArrayLike) -> tuple[_I64, float]: ...
+    def estimate_theta(
+        self,
+        x: _ArrayLike,
+        *,
+        init: _ArrayLike | None = None,
+        n_iter: int = 50,
+        tol: float = 1e-06,
+        prior: tuple[_ArrayLike, _ArrayLike] | None = None,
+        multi_start: bool = False,
+    ) -> ThetaEstimate: ...
+    def sample(
+        self, theta: _ArrayLike, *, length: int | None = None, seed: int = 0
+    ) -> tuple[_F64, _I64]: ...
+    def expected_trajectory(self, theta: _ArrayLike, *, length: int | None = None) -> _F64: ...
