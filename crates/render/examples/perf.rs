@@ -82,6 +82,15 @@ fn main() {
             c / 1e6,
             t / 1e6
         );
+        let p0 = EdgeParams { sigma: 0.0, ..p };
+        let (c, t) = time(15, 5, || {
+            std::hint::black_box(ws.compute(frame.view(), &p0).expect("edges").data()[0]);
+        });
+        println!(
+            "  without smoothing: cpu {:.3} ms, wall {:.3} ms",
+            c / 1e6,
+            t / 1e6
+        );
     }
     let c640 = cam(640, 480);
     let frame = s.render(&c640, &pose, 1).expect("frame");

@@ -184,28 +184,7 @@ impl EdgeWorkspace {
         let (w32, h32) = frame.size();
         let (w, h) = (w32 as usize, h32 as usize);
         let n = w * h;
-        self.grey.resize(n, 0.0);
-        match frame {
-            ImageView::Rgb8 { data, .. } => {
-                for (g, px) in self.grey.iter_mut().zip(data.chunks_exact(3)) {
-                    *g = 0.299 * f32::from(px[0])
-                        + 0.587 * f32::from(px[1])
-                        + 0.114 * f32::from(px[2]);
-                }
-            }
-            ImageView::Grey8 { data, .. } => {
-                for (g, &p) in self.grey.iter_mut().zip(data) {
-                    *g = f32::from(p);
-                }
-            }
-            ImageView::GreyF32 { data, .. } => {
-                for (g, &p) in self.grey.iter_mut().zip(data) {
-                    *g = if p.is_finite() { p } else { 0.0 };
-                }
-            }
-        }
-        self.sobel(w, h);
-        let max_g = max_value(&self.mag);
+        let max_g = self.sobel(&frame, w, h);
         self.out.width = w32;
         self.out.height = h32;
         self.out.data.resize(n, 0.0);
@@ -213,26 +192,20 @@ impl EdgeWorkspace {
             self.out.data.fill(0.0);
             return Ok(&self.out);
         }
-        let inv = 1.0 / max_g;
-        let tau = params.tau;
-        if params.binary {
-            for g in &mut self.mag {
-                *g = if *g * inv > tau { 1.0 } else { 0.0 };
-            }
-        } else {
-            for g in &mut self.mag {
-                let v = *g * inv;
-                *g = if v > tau { 1.0 } else { v };
-            }
-        }
-        if params.sigma > 0.0 {
+        let thr = Threshold {
+            inv: 1.0 / max_g,
+            tau: params.tau,
+            binary: params.binary,
+        };
+        let max_out = if params.sigma > 0.0 {
             self.make_kernel(params.sigma);
-            self.gauss_rows(w, h);
-            self.gauss_cols(w, h);
+            self.gauss(w, h, thr)
         } else {
-            self.out.data.copy_from_slice(&self.mag);
-        }
-        let max_out = max_value(&self.out.data);
+            for (o, &g) in self.out.data.iter_mut().zip(&self.mag) {
+                *o = thr.apply(g);
+            }
+            max_value(&self.out.data)
+        };
         if max_out > 0.0 {
             let inv = 1.0 / max_out;
             for g in &mut self.out.data {
@@ -249,28 +222,36 @@ impl EdgeWorkspace {
         &self.out
     }
 
-    /// Sobel (3×3, /8) gradient magnitude of `grey` into `mag`, borders clamped. Separable:
-    /// per row, the vertical smoothing `a + 2c + b` and the vertical difference `b − a`, then
-    /// horizontal difference / smoothing of those.
+    /// Sobel (3×3, /8) gradient magnitude of the frame's grey values into `mag`, borders
+    /// clamped; returns max(mag). Grey rows are converted on the fly into a ring of three rows.
+    /// Separable: per row, the vertical smoothing `a + 2c + b` and the vertical difference
+    /// `b − a`, then horizontal difference / smoothing of those.
     // `hypot` does not vectorise; |g| ≤ 255·2, so the plain form cannot overflow.
     #[allow(clippy::imprecise_flops)]
-    fn sobel(&mut self, w: usize, h: usize) {
+    fn sobel(&mut self, frame: &ImageView<'_>, w: usize, h: usize) -> f32 {
         self.mag.resize(w * h, 0.0);
         self.sv.resize(w, 0.0);
         self.dv.resize(w, 0.0);
+        self.grey.resize(3 * w, 0.0);
+        let mut slot_row = [usize::MAX; 3];
+        let mut lanes = [0f32; 8];
         for y in 0..h {
-            let a = &self.grey[y.saturating_sub(1) * w..][..w];
-            let c = &self.grey[y * w..][..w];
-            let b = &self.grey[(y + 1).min(h - 1) * w..][..w];
-            for (((sv, dv), (&a, &c)), &b) in self
-                .sv
-                .iter_mut()
-                .zip(self.dv.iter_mut())
-                .zip(a.iter().zip(c))
-                .zip(b)
+            let ys = [y.saturating_sub(1), y, (y + 1).min(h - 1)];
+            for &yy in &ys {
+                if slot_row[yy % 3] != yy {
+                    grey_row(frame, yy, &mut self.grey[(yy % 3) * w..][..w]);
+                    slot_row[yy % 3] = yy;
+                }
+            }
+            let a = &self.grey[(ys[0] % 3) * w..][..w];
+            let c = &self.grey[(ys[1] % 3) * w..][..w];
+            let b = &self.grey[(ys[2] % 3) * w..][..w];
             {
-                *sv = a + 2.0 * c + b;
-                *dv = b - a;
+                let (svr, dvr) = (&mut self.sv[..w], &mut self.dv[..w]);
+                for x in 0..w {
+                    svr[x] = a[x] + 2.0 * c[x] + b[x];
+                    dvr[x] = b[x] - a[x];
+                }
             }
             let out = &mut self.mag[y * w..][..w];
             let (sv, dv) = (&self.sv[..w], &self.dv[..w]);
@@ -280,21 +261,24 @@ impl EdgeWorkspace {
                 (gx * gx + gy * gy).sqrt()
             };
             if w >= 3 {
-                for ((o, (sl, sr)), ((dl, dc), dr)) in out[1..w - 1]
-                    .iter_mut()
-                    .zip(sv.iter().zip(&sv[2..]))
-                    .zip(dv.iter().zip(&dv[1..]).zip(&dv[2..]))
-                {
-                    let gx = (sr - sl) * 0.125;
-                    let gy = (dl + 2.0 * dc + dr) * 0.125;
-                    *o = (gx * gx + gy * gy).sqrt();
+                let n = w - 2;
+                let (sl, sr) = (&sv[..n], &sv[2..2 + n]);
+                let (dl, dc, dr) = (&dv[..n], &dv[1..=n], &dv[2..2 + n]);
+                let o = &mut out[1..=n];
+                for x in 0..n {
+                    let gx = (sr[x] - sl[x]) * 0.125;
+                    let gy = (dl[x] + 2.0 * dc[x] + dr[x]) * 0.125;
+                    o[x] = (gx * gx + gy * gy).sqrt();
                 }
             }
             out[0] = at(0, 0, 1.min(w - 1));
             if w > 1 {
                 out[w - 1] = at(w - 2, w - 1, w - 1);
             }
+            let m = max_value(out);
+            lanes[y % 8] = if m > lanes[y % 8] { m } else { lanes[y % 8] };
         }
+        max_value(&lanes)
     }
 
     fn make_kernel(&mut self, sigma: f32) {
@@ -314,89 +298,153 @@ impl EdgeWorkspace {
         self.kernel_sigma = sigma;
     }
 
-    /// Horizontal pass `mag → tmp`, borders clamped via a padded row.
-    fn gauss_rows(&mut self, w: usize, h: usize) {
+    /// Threshold + separable Gaussian `mag → out`, borders clamped; returns max(out). The
+    /// horizontal pass writes into a ring of 2r+1 rows that the vertical pass reads, so the
+    /// intermediate image never leaves the cache.
+    fn gauss(&mut self, w: usize, h: usize, thr: Threshold) -> f32 {
         let k = &self.kernel[..];
         let r = k.len() - 1;
-        self.tmp.resize(w * h, 0.0);
-        self.pad.resize(w + 2 * r + BLOCK, 0.0);
-        for (src, dst) in self.mag.chunks_exact(w).zip(self.tmp.chunks_exact_mut(w)) {
-            let pad = &mut self.pad[..];
-            pad[..r].fill(src[0]);
-            pad[r..r + w].copy_from_slice(src);
-            pad[r + w..].fill(src[w - 1]);
-            let pad = &self.pad[..];
-            let mut x = 0;
-            let mut chunks = dst.chunks_exact_mut(BLOCK);
-            for oc in &mut chunks {
-                let win = &pad[x..x + 2 * r + BLOCK];
-                let mut acc = [0f32; BLOCK];
-                let c = block(win, r);
-                for i in 0..BLOCK {
-                    acc[i] = k[0] * c[i];
+        let ring = 2 * r + 1;
+        self.tmp.resize(ring * w, 0.0);
+        self.pad.resize(w + 2 * r, 0.0);
+        self.rows.resize(ring, 0);
+        let mut next = 0;
+        let mut lanes = [0f32; 8];
+        for y in 0..h {
+            while next <= (y + r).min(h - 1) {
+                let src = &self.mag[next * w..][..w];
+                let pad = &mut self.pad[..];
+                for (p, &g) in pad[r..r + w].iter_mut().zip(src) {
+                    *p = thr.apply(g);
                 }
-                for (j, &kj) in k.iter().enumerate().skip(1) {
-                    let a = block(win, r - j);
-                    let b = block(win, r + j);
-                    for i in 0..BLOCK {
-                        acc[i] += kj * (a[i] + b[i]);
-                    }
-                }
-                oc.copy_from_slice(&acc);
-                x += BLOCK;
+                let (first, last) = (pad[r], pad[r + w - 1]);
+                pad[..r].fill(first);
+                pad[r + w..].fill(last);
+                gauss_row(&self.pad, k, &mut self.tmp[(next % ring) * w..][..w]);
+                next += 1;
             }
-            for o in chunks.into_remainder() {
-                let mut acc = k[0] * pad[x + r];
-                for (j, &kj) in k.iter().enumerate().skip(1) {
-                    acc += kj * (pad[x + r - j] + pad[x + r + j]);
-                }
-                *o = acc;
-                x += 1;
+            // Ring offsets of rows y−r … y+r (clamped).
+            for (t, o) in self.rows.iter_mut().enumerate() {
+                let yy = (y + t).saturating_sub(r).min(h - 1);
+                *o = (yy % ring) * w;
+            }
+            let dst = &mut self.out.data[y * w..][..w];
+            gauss_col(&self.tmp, &self.rows, k, dst);
+            let m = max_value(dst);
+            lanes[y % 8] = if m > lanes[y % 8] { m } else { lanes[y % 8] };
+        }
+        max_value(&lanes)
+    }
+}
+
+/// Normalisation by max(g) and the threshold τ of SPEC §4.1 steps 3–4.
+#[derive(Clone, Copy)]
+struct Threshold {
+    inv: f32,
+    tau: f32,
+    binary: bool,
+}
+
+impl Threshold {
+    #[inline]
+    fn apply(self, g: f32) -> f32 {
+        let v = g * self.inv;
+        if v > self.tau {
+            1.0
+        } else if self.binary {
+            0.0
+        } else {
+            v
+        }
+    }
+}
+
+/// One grey row (0.299 R + 0.587 G + 0.114 B for colour frames).
+fn grey_row(frame: &ImageView<'_>, y: usize, dst: &mut [f32]) {
+    let w = dst.len();
+    match *frame {
+        ImageView::Rgb8 { data, .. } => {
+            for (g, px) in dst
+                .iter_mut()
+                .zip(data[3 * y * w..3 * (y + 1) * w].chunks_exact(3))
+            {
+                *g = 0.299 * f32::from(px[0]) + 0.587 * f32::from(px[1]) + 0.114 * f32::from(px[2]);
+            }
+        }
+        ImageView::Grey8 { data, .. } => {
+            for (g, &p) in dst.iter_mut().zip(&data[y * w..(y + 1) * w]) {
+                *g = f32::from(p);
+            }
+        }
+        ImageView::GreyF32 { data, .. } => {
+            for (g, &p) in dst.iter_mut().zip(&data[y * w..(y + 1) * w]) {
+                *g = if p.is_finite() { p } else { 0.0 };
             }
         }
     }
+}
 
-    /// Vertical pass `tmp → out`, borders clamped. Blocks of 16 columns keep the accumulators
-    /// in registers across all taps.
-    fn gauss_cols(&mut self, w: usize, h: usize) {
-        let k = &self.kernel[..];
-        let r = k.len() - 1;
-        let src = &self.tmp[..];
-        self.rows.resize(2 * r + 1, 0);
-        for (y, dst) in self.out.data.chunks_exact_mut(w).enumerate() {
-            // Row offsets of y−r … y+r (clamped), so the column loop does no index arithmetic.
-            for (t, o) in self.rows.iter_mut().enumerate() {
-                let yy = (y + t).saturating_sub(r).min(h - 1);
-                *o = yy * w;
-            }
-            let rows = &self.rows[..];
-            let mut x = 0;
-            let mut chunks = dst.chunks_exact_mut(BLOCK);
-            for oc in &mut chunks {
-                let mut acc = [0f32; BLOCK];
-                let c = block(src, rows[r] + x);
-                for i in 0..BLOCK {
-                    acc[i] = k[0] * c[i];
-                }
-                for (j, &kj) in k.iter().enumerate().skip(1) {
-                    let a = block(src, rows[r - j] + x);
-                    let b = block(src, rows[r + j] + x);
-                    for i in 0..BLOCK {
-                        acc[i] += kj * (a[i] + b[i]);
-                    }
-                }
-                oc.copy_from_slice(&acc);
-                x += BLOCK;
-            }
-            for o in chunks.into_remainder() {
-                let mut acc = k[0] * src[rows[r] + x];
-                for (j, &kj) in k.iter().enumerate().skip(1) {
-                    acc += kj * (src[rows[r - j] + x] + src[rows[r + j] + x]);
-                }
-                *o = acc;
-                x += 1;
+/// Horizontal Gaussian of a padded row (`pad.len() == dst.len() + 2r`), blocks of 16 columns
+/// with the accumulators in registers across all taps.
+fn gauss_row(pad: &[f32], k: &[f32], dst: &mut [f32]) {
+    let r = k.len() - 1;
+    let mut x = 0;
+    let mut chunks = dst.chunks_exact_mut(BLOCK);
+    for oc in &mut chunks {
+        let win = &pad[x..x + 2 * r + BLOCK];
+        let mut acc = [0f32; BLOCK];
+        let c = block(win, r);
+        for i in 0..BLOCK {
+            acc[i] = k[0] * c[i];
+        }
+        for (j, &kj) in k.iter().enumerate().skip(1) {
+            let a = block(win, r - j);
+            let b = block(win, r + j);
+            for i in 0..BLOCK {
+                acc[i] += kj * (a[i] + b[i]);
             }
         }
+        oc.copy_from_slice(&acc);
+        x += BLOCK;
+    }
+    for o in chunks.into_remainder() {
+        let mut acc = k[0] * pad[x + r];
+        for (j, &kj) in k.iter().enumerate().skip(1) {
+            acc += kj * (pad[x + r - j] + pad[x + r + j]);
+        }
+        *o = acc;
+        x += 1;
+    }
+}
+
+/// Vertical Gaussian of one output row from the rows at offsets `rows` (y−r … y+r) of `src`.
+fn gauss_col(src: &[f32], rows: &[usize], k: &[f32], dst: &mut [f32]) {
+    let r = k.len() - 1;
+    let mut x = 0;
+    let mut chunks = dst.chunks_exact_mut(BLOCK);
+    for oc in &mut chunks {
+        let mut acc = [0f32; BLOCK];
+        let c = block(src, rows[r] + x);
+        for i in 0..BLOCK {
+            acc[i] = k[0] * c[i];
+        }
+        for (j, &kj) in k.iter().enumerate().skip(1) {
+            let a = block(src, rows[r - j] + x);
+            let b = block(src, rows[r + j] + x);
+            for i in 0..BLOCK {
+                acc[i] += kj * (a[i] + b[i]);
+            }
+        }
+        oc.copy_from_slice(&acc);
+        x += BLOCK;
+    }
+    for o in chunks.into_remainder() {
+        let mut acc = k[0] * src[rows[r] + x];
+        for (j, &kj) in k.iter().enumerate().skip(1) {
+            acc += kj * (src[rows[r - j] + x] + src[rows[r + j] + x]);
+        }
+        *o = acc;
+        x += 1;
     }
 }
 
@@ -404,7 +452,7 @@ impl EdgeWorkspace {
 const BLOCK: usize = 16;
 
 /// `BLOCK` values of `s` from `at` as a fixed-size array (one bounds check).
-#[inline(always)]
+#[inline]
 fn block(s: &[f32], at: usize) -> [f32; BLOCK] {
     let mut out = [0f32; BLOCK];
     out.copy_from_slice(&s[at..at + BLOCK]);

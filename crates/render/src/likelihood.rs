@@ -30,6 +30,9 @@ thread_local! {
 /// range is `[−V/(2γ²), 0]`; a pose with a non-finite coordinate scores the minimum
 /// `−V/(2γ²)`. Poses are in the world frame and are rendered as given: correct them first
 /// with [`crate::correct_arm`].
+///
+/// Eq. 4 sums per-view means, so the likelihood sharpens with the number of views V (SPEC
+/// E19); pass e.g. γ·√V as `gamma` to keep the single-view sharpness.
 #[derive(Debug, Clone)]
 pub struct LikelihoodModel {
     cameras: Vec<Camera>,
