@@ -40,7 +40,6 @@ pub(crate) fn phmm_error(e: &actrack_phmm::PhmmError) -> PyErr {
 }
 
 /// Errors of the `actrack` crate: I/O failures become `ActrackOSError`, the rest `ActrackError`.
-#[allow(dead_code)] // used by the bindings of the `actrack` crate as they land
 pub(crate) fn actrack_error(e: &actrack::Error) -> PyErr {
     match e {
         actrack::Error::Read { path, source } | actrack::Error::Write { path, source } => {

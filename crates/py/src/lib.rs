@@ -6,7 +6,8 @@
 //! ([`convert`]), maps errors to `actrack.ActrackError` (a `ValueError`) or
 //! `actrack.ActrackOSError` (an `OSError`) ([`errors`]), and releases the GIL around heavy work.
 //!
-//! Modules: [`models`] (`Hmm`, `Phmm`, `FitReport`, `ThetaEstimate`).
+//! Modules: [`models`] (`Hmm`, `Phmm`, `FitReport`, `ThetaEstimate`), [`io`] (`ActionModel`,
+//! `load_mocap`, `Scene`, `evaluate`).
 
 // pyo3 extracts arguments as owned values (`PathBuf`, `PyRef`), so by-value parameters are the
 // binding convention here, not an oversight.
@@ -16,6 +17,7 @@ use pyo3::prelude::*;
 
 pub mod convert;
 pub mod errors;
+pub mod io;
 pub mod models;
 
 /// The extension module `actrack._actrack`.
@@ -29,5 +31,9 @@ fn _actrack(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<models::PyPhmm>()?;
     m.add_class::<models::PyFitReport>()?;
     m.add_class::<models::PyThetaEstimate>()?;
+    m.add_class::<io::PyActionModel>()?;
+    m.add_class::<io::PyScene>()?;
+    m.add_function(wrap_pyfunction!(io::load_mocap, m)?)?;
+    m.add_function(wrap_pyfunction!(io::evaluate, m)?)?;
     Ok(())
 }

@@ -74,6 +74,16 @@ def is_property(node: ast.FunctionDef) -> bool:
     return any(isinstance(d, ast.Name) and d.id == "property" for d in node.decorator_list)
 
 
+def stub_functions() -> dict[str, ast.FunctionDef]:
+    return {n.name: n for n in stub_tree().body if isinstance(n, ast.FunctionDef)}
+
+
+@pytest.mark.parametrize("name", sorted(stub_functions()))
+def test_function_signatures_match(name):
+    expected = stub_params(stub_functions()[name], is_method=False)
+    assert runtime_params(getattr(_actrack, name)) == expected
+
+
 @pytest.mark.parametrize("cls_name", sorted(stub_classes()))
 def test_class_members_match(cls_name):
     node = stub_classes()[cls_name]

@@ -8,21 +8,29 @@ or written raises :class:`ActrackOSError` (an ``OSError``). Both carry the Rust 
 """
 
 from ._actrack import (
+    ActionModel,
     ActrackError,
     ActrackOSError,
     FitReport,
     Hmm,
     Phmm,
+    Scene,
     ThetaEstimate,
     __version__,
+    evaluate,
+    load_mocap,
 )
 
 __all__ = [
+    "ActionModel",
     "ActrackError",
     "ActrackOSError",
     "FitReport",
     "Hmm",
     "Phmm",
+    "Scene",
     "ThetaEstimate",
     "__version__",
+    "evaluate",
+    "load_mocap",
 ]
