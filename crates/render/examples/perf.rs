@@ -1,6 +1,5 @@
-//! Quick single-core timing of the observation model, in CPU time of the calling thread (read
-//! from /proc/thread-self/schedstat on Linux, so that a loaded machine does not inflate the
-//! numbers), falling back to wall time elsewhere. `cargo run --release --example perf`.
+//! Quick single-core timing of the observation model (minimum and median wall time per call).
+//! `cargo run --release -p actrack-render --example perf`.
 
 use std::time::Instant;
 
@@ -12,36 +11,21 @@ use nalgebra::Vector3;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 
-fn cpu_ns() -> Option<u64> {
-    let s = std::fs::read_to_string("/proc/thread-self/schedstat").ok()?;
-    s.split_whitespace().next()?.parse().ok()
-}
-
-/// Median over `reps` repetitions of the per-call time of `f` run `inner` times, in ns:
-/// (CPU time, wall time).
+/// Per-call wall time of `f` run `inner` times, over `reps` repetitions, in ns:
+/// (minimum, median). On a loaded machine the minimum is the better estimate of the cost on an
+/// idle core.
 fn time<F: FnMut()>(reps: usize, inner: usize, mut f: F) -> (f64, f64) {
-    let mut cpu = Vec::new();
-    let mut wall = Vec::new();
-    for _ in 0..reps {
-        let c0 = cpu_ns();
-        let t0 = Instant::now();
-        for _ in 0..inner {
-            f();
-        }
-        let dt = t0.elapsed().as_nanos() as f64 / inner as f64;
-        if let (Some(a), Some(b)) = (c0, cpu_ns()) {
-            cpu.push((b - a) as f64 / inner as f64);
-        }
-        wall.push(dt);
-    }
-    let med = |v: &mut Vec<f64>| {
-        if v.is_empty() {
-            return f64::NAN;
-        }
-        v.sort_by(f64::total_cmp);
-        v[v.len() / 2]
-    };
-    (med(&mut cpu), med(&mut wall))
+    let mut wall: Vec<f64> = (0..reps)
+        .map(|_| {
+            let t0 = Instant::now();
+            for _ in 0..inner {
+                f();
+            }
+            t0.elapsed().as_nanos() as f64 / inner as f64
+        })
+        .collect();
+    wall.sort_by(f64::total_cmp);
+    (wall[0], wall[wall.len() / 2])
 }
 
 fn main() {
@@ -74,20 +58,20 @@ fn main() {
         let frame = s.render(&cam(w, h), &pose, 1).expect("frame");
         let mut ws = EdgeWorkspace::new();
         let p = EdgeParams::default();
-        let (c, t) = time(15, 5, || {
+        let (c, t) = time(41, 2, || {
             std::hint::black_box(ws.compute(frame.view(), &p).expect("edges").data()[0]);
         });
         println!(
-            "edge image {w}x{h}: cpu {:.3} ms, wall {:.3} ms",
+            "edge image {w}x{h}: min {:.3} ms, median {:.3} ms",
             c / 1e6,
             t / 1e6
         );
         let p0 = EdgeParams { sigma: 0.0, ..p };
-        let (c, t) = time(15, 5, || {
+        let (c, t) = time(41, 2, || {
             std::hint::black_box(ws.compute(frame.view(), &p0).expect("edges").data()[0]);
         });
         println!(
-            "  without smoothing: cpu {:.3} ms, wall {:.3} ms",
+            "  without smoothing: min {:.3} ms, median {:.3} ms",
             c / 1e6,
             t / 1e6
         );
@@ -113,12 +97,12 @@ fn main() {
         let n = actrack_render::contour_points(&c640, &g, &pose, method).len();
         let m = LikelihoodModel::new(vec![c640.clone()], g.clone(), 0.15, method).expect("model");
         let mut i = 0;
-        let (c, t) = time(21, 256, || {
+        let (c, t) = time(101, 64, || {
             i = (i + 1) % poses.len();
             std::hint::black_box(m.log_likelihood(&edges, &poses[i]).expect("score"));
         });
         println!(
-            "{method:?} likelihood (|C| = {n}): cpu {:.2} µs, wall {:.2} µs",
+            "{method:?} likelihood (|C| = {n}): min {:.2} µs, median {:.2} µs",
             c / 1e3,
             t / 1e3
         );

@@ -252,10 +252,12 @@ impl Prepared {
             Self::Circle { c, r } => arc(c, r, Vector2::x(), std::f64::consts::TAU, &mut f),
             Self::Ellipse { c, a, b, ea, eb } => {
                 let n = arc_n(a, std::f64::consts::TAU);
-                let dt = std::f64::consts::TAU / n as f64;
-                for k in 0..n {
-                    let (s, co) = (-(k as f64) * dt).sin_cos();
+                // Angle decreasing by dt per point, by rotation (no sin/cos per point).
+                let (sd, cd) = (std::f64::consts::TAU / n as f64).sin_cos();
+                let (mut co, mut s) = (1.0f64, 0.0f64);
+                for _ in 0..n {
                     f(c + ea * (a * co) + eb * (b * s));
+                    (co, s) = (co * cd + s * sd, s * cd - co * sd);
                 }
             }
             Self::Capsule {
