@@ -314,10 +314,10 @@ impl ValidPhmmParams {
                 got: p,
             });
         }
-        let min_len = if end_mode == EndMode::MustEnd {
-            (n - 1).div_ceil(j.max(1)) + 1
-        } else {
-            1
+        let min_len = match model {
+            Some(m) => m.min_sequence_len(),
+            None if end_mode == EndMode::MustEnd => (n - 1).div_ceil(j.max(1)) + 1,
+            None => 1,
         };
         for (index, x) in seqs.iter().enumerate() {
             if x.nrows() == 0 {
@@ -485,7 +485,7 @@ impl ValidPhmmParams {
         let covs = cov
             .into_iter()
             .enumerate()
-            .map(|(i, c)| self.regularise(c, global_scale, i))
+            .map(|(i, c)| self.regularise(c, prm.covariance, global_scale, i))
             .collect::<Result<Vec<_>, _>>()?;
         // Transitions (SPEC §1.4 step 3).
         let mean_len = set.lens.iter().sum::<usize>() as f64 / set.lens.len() as f64;
@@ -553,11 +553,12 @@ impl ValidPhmmParams {
     fn regularise(
         &self,
         mut c: DMatrix<f64>,
+        kind: CovarianceKind,
         global_scale: f64,
         state: usize,
     ) -> Result<DMatrix<f64>, PhmmError> {
         symmetrise(&mut c);
-        if self.0.covariance == CovarianceKind::Diagonal {
+        if kind == CovarianceKind::Diagonal {
             let dg = c.diagonal();
             c = DMatrix::from_diagonal(&dg);
         }
@@ -777,7 +778,7 @@ impl ValidPhmmParams {
             }
             fill_upper(&mut c);
             c /= occ[i];
-            let Ok(c) = self.regularise(c, global_scale, i) else {
+            let Ok(c) = self.regularise(c, old.covariance_kind, global_scale, i) else {
                 // Keep the previous state parameters rather than produce a broken model.
                 continue;
             };
