@@ -6,13 +6,19 @@
 //!
 //! Not implemented yet: see the project's issues.
 
+pub mod demo;
 pub mod error;
 pub mod eval;
 pub mod frames;
 pub mod manifest;
+pub mod mcap_out;
 pub mod mocap;
 pub mod model;
+pub mod motion;
+pub mod pipeline;
+pub mod plots;
 pub mod scene;
+pub mod synth;
 pub mod track_csv;
 pub mod train;
 pub use error::{Error, Result};

@@ -635,13 +635,14 @@ fn camera_from_toml(c: &CameraToml, i: usize, path: &Path) -> Result<Camera> {
     })
 }
 
-/// A default synthetic scene: table 80 × 30 cm at 0.75 m, actor shoulder 0.35 m above it and
-/// 0.35 m before the region's centre, one camera of `width`×`height` looking at the workspace from
+/// A default synthetic scene: a 60 × 24 cm table region at 0.75 m, the actor's shoulder 0.35 m
+/// above it, 0.40 m before and 0.05 m to the right of the region's centre (every corner within
+/// reach of a 0.29 + 0.45 m arm), one camera of `width`×`height` looking at the workspace from
 /// the actor's front right.
 pub fn default_scene(width: u32, height: u32) -> Scene {
     let f = 0.9 * f64::from(width);
-    let eye = Vector3::new(0.9, 1.45, 1.55);
-    let target = Vector3::new(0.0, 0.3, 0.85);
+    let eye = Vector3::new(0.85, 1.25, 1.55);
+    let target = Vector3::new(0.0, 0.35, 0.9);
     let (r_cw, t_cw) =
         look_at(eye, target, Vector3::z()).unwrap_or((Matrix3::identity(), Vector3::zeros()));
     Scene {
@@ -662,10 +663,10 @@ pub fn default_scene(width: u32, height: u32) -> Scene {
                 origin: Vector3::new(0.0, 0.5, 0.75),
                 yaw: 0.0,
             },
-            half_extents: [0.4, 0.15],
+            half_extents: [0.3, 0.12],
         },
         actor: Placement {
-            origin: Vector3::new(0.15, 0.0, 1.1),
+            origin: Vector3::new(0.05, 0.1, 1.1),
             yaw: 0.0,
         },
         side: Side::Right,

@@ -220,6 +220,7 @@ pub fn temp_path(path: &Path) -> std::path::PathBuf {
 }
 
 #[cfg(test)]
+#[allow(clippy::float_cmp)]
 mod tests {
     use super::*;
 

@@ -1,0 +1,452 @@
+//! The `track` pipeline (SPEC §3.8): frames → edge image → particle filter in action space →
+//! per-frame estimates → MCAP, CSV and overlay images.
+//!
+//! [`SceneObservation`] is the [`ObservationModel`] of the filter: it corrects generated poses
+//! with the arm lengths (SPEC §3.4; lengths are invariant under the rigid actor → world map, so
+//! correcting in the actor frame is the same), maps them to the world with the scene's actor
+//! placement and scores them with `actrack-render`'s contour likelihood over every view.
+//!
+//! `track` reads one video, filmed by the scene's first camera; several synchronised views go
+//! through [`Pipeline::step`] with one image per camera.
+
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+use actrack_pf::{Estimate, ObservationModel, TableRegion, Tracker, TrackerConfig};
+pub use actrack_render::ContourMethod;
+use actrack_render::{
+    ArmGeometry as RenderArm, Camera as RenderCamera, EdgeImage, EdgeParams, EdgeWorkspace,
+    ImageView, LikelihoodModel, contour_points, correct_arm,
+};
+use image::RgbImage;
+use nalgebra::Vector3;
+
+use crate::error::{Error, Result};
+use crate::frames::FrameSource;
+use crate::mcap_out::{EstimateMsg, FrameRecord, TrackWriter};
+use crate::model::ActionModel;
+use crate::scene::{Camera, Scene};
+use crate::track_csv::{TrajRow, Trajectory};
+
+/// Sets the number of worker threads of the global pool (once, before any tracking).
+pub fn set_threads(n: usize) -> Result<()> {
+    if n == 0 {
+        return Err(Error::Config("--threads must be ≥ 1".into()));
+    }
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(n)
+        .build_global()
+        .map_err(|e| Error::Config(format!("cannot set up {n} threads: {e}")))
+}
+
+/// γ of SPEC Eq. 3.
+pub const GAMMA: f64 = 0.15;
+
+/// Converts a scene camera to the renderer's.
+pub fn render_camera(c: &Camera) -> RenderCamera {
+    let r = c.r_cw;
+    RenderCamera {
+        width: c.width,
+        height: c.height,
+        fx: c.fx,
+        fy: c.fy,
+        cx: c.cx,
+        cy: c.cy,
+        distortion: c.distortion,
+        rotation: [0, 1, 2].map(|i| [r[(i, 0)], r[(i, 1)], r[(i, 2)]]),
+        translation: [c.t_cw.x, c.t_cw.y, c.t_cw.z],
+    }
+}
+
+/// The renderer's arm geometry: the scene's radii and the model's lengths (unless the scene
+/// overrides them).
+pub fn render_arm(scene: &Scene, lengths: [f64; 2]) -> RenderArm {
+    let a = &scene.arm;
+    RenderArm {
+        l1: a.upper_arm_length.unwrap_or(lengths[0]),
+        l2: a.lower_arm_length.unwrap_or(lengths[1]),
+        upper_radii: a.upper_arm_radii,
+        forearm_radii: a.forearm_radii,
+        forearm_fraction: a.forearm_fraction,
+        hand_half_axes: a.hand_half_axes,
+    }
+}
+
+/// Edge-image parameters for a frame width: SPEC §4.1 (σ_G = 4 px at 640 px, scaled).
+pub fn edge_params(width: u32) -> EdgeParams {
+    EdgeParams {
+        sigma: (4.0 * f64::from(width) / 640.0).clamp(1.0, 8.0) as f32,
+        ..EdgeParams::default()
+    }
+}
+
+/// The observation model of one frame.
+pub struct SceneObservation<'a> {
+    scene: &'a Scene,
+    geometry: &'a RenderArm,
+    likelihood: &'a LikelihoodModel,
+    edges: &'a [EdgeImage],
+}
+
+impl ObservationModel for SceneObservation<'_> {
+    fn correct(&self, pose: &mut [f64; 9]) {
+        correct_arm(self.geometry, pose, None);
+    }
+
+    fn log_likelihoods(&self, poses: &[[f64; 9]], out: &mut [f64]) {
+        let world: Vec<[f64; 9]> = poses.iter().map(|p| self.scene.pose_to_world(p)).collect();
+        if self
+            .likelihood
+            .log_likelihood_batch(self.edges, &world, out)
+            .is_err()
+        {
+            out.fill(f64::NAN);
+        }
+    }
+}
+
+/// Options of the pipeline.
+#[derive(Clone, Debug)]
+pub struct TrackOptions {
+    /// Number of particles M.
+    pub particles: usize,
+    /// Seed of every random draw.
+    pub seed: u64,
+    /// Contour method of the likelihood.
+    pub contour: ContourMethod,
+}
+
+impl Default for TrackOptions {
+    fn default() -> Self {
+        Self {
+            particles: 400,
+            seed: 0,
+            contour: ContourMethod::Raster,
+        }
+    }
+}
+
+/// One frame's result in the world.
+#[derive(Clone, Debug)]
+pub struct FrameResult {
+    /// The filter's estimate (actor frame).
+    pub estimate: Estimate,
+    /// Best particle's pose, world.
+    pub best_world: [f64; 9],
+    /// Median-filtered pose, world.
+    pub smoothed_world: [f64; 9],
+    /// θ̄ on the table, world.
+    pub theta_world: Vector3<f64>,
+}
+
+/// The tracker with its observation model.
+pub struct Pipeline {
+    scene: Scene,
+    geometry: RenderArm,
+    likelihood: LikelihoodModel,
+    tracker: Tracker,
+    workspaces: Vec<EdgeWorkspace>,
+    names: Vec<String>,
+}
+
+impl Pipeline {
+    /// Builds the tracker for `model` in `scene`.
+    pub fn new(model: &ActionModel, scene: &Scene, opts: &TrackOptions) -> Result<Self> {
+        let geometry = render_arm(
+            scene,
+            [model.arm_lengths.upper_arm, model.arm_lengths.forearm_hand],
+        );
+        let cameras: Vec<RenderCamera> = scene.cameras.iter().map(render_camera).collect();
+        let likelihood = LikelihoodModel::new(cameras, geometry.clone(), GAMMA, opts.contour)
+            .map_err(|e| Error::Config(format!("observation model: {e}")))?;
+        let (centre, half) = scene.theta_region();
+        let config = TrackerConfig::builder(TableRegion::new(centre, half))
+            .particles(opts.particles)
+            .seed(opts.seed)
+            .build()
+            .map_err(|e| Error::Config(format!("tracker: {e}")))?;
+        let names: Vec<String> = model.actions.iter().map(|a| a.name.clone()).collect();
+        let tracker = Tracker::new(model.actions.iter().map(|a| &a.phmm), names.clone(), config)
+            .map_err(|e| Error::Model {
+                context: "building the tracker".into(),
+                message: e.to_string(),
+            })?;
+        Ok(Self {
+            scene: scene.clone(),
+            geometry,
+            likelihood,
+            tracker,
+            workspaces: scene.cameras.iter().map(|_| EdgeWorkspace::new()).collect(),
+            names,
+        })
+    }
+
+    /// Action names.
+    pub fn action_names(&self) -> &[String] {
+        &self.names
+    }
+
+    /// The tracker (particles, weights).
+    pub fn tracker(&self) -> &Tracker {
+        &self.tracker
+    }
+
+    /// The arm geometry used for rendering.
+    pub fn geometry(&self) -> &RenderArm {
+        &self.geometry
+    }
+
+    /// One step on synchronised images, one per camera (fewer: the missing views carry no
+    /// contour). Errors name the frame when an image does not fit its camera.
+    pub fn step(&mut self, frame: usize, images: &[&RgbImage]) -> Result<FrameResult> {
+        let mut edges = Vec::with_capacity(images.len());
+        for (v, img) in images.iter().enumerate().take(self.scene.cameras.len()) {
+            let cam = &self.scene.cameras[v];
+            if img.dimensions() != (cam.width, cam.height) {
+                return Err(Error::Config(format!(
+                    "frame {frame}: the image is {}×{} but camera `{}` of the scene is {}×{}",
+                    img.width(),
+                    img.height(),
+                    cam.name,
+                    cam.width,
+                    cam.height
+                )));
+            }
+            let view = ImageView::rgb8(img.as_raw(), img.width(), img.height())
+                .map_err(|e| Error::Config(format!("frame {frame}: {e}")))?;
+            let g = self.workspaces[v]
+                .compute(view, &edge_params(cam.width))
+                .map_err(|e| Error::Config(format!("frame {frame}: {e}")))?;
+            edges.push(g.clone());
+        }
+        let obs = SceneObservation {
+            scene: &self.scene,
+            geometry: &self.geometry,
+            likelihood: &self.likelihood,
+            edges: &edges,
+        };
+        let estimate = self.tracker.step(&obs);
+        let best_world = self.scene.pose_to_world(&estimate.best_pose);
+        let smoothed_world = self.scene.pose_to_world(&estimate.smoothed_pose);
+        let theta_world = self.scene.theta_to_world(estimate.theta_mean);
+        Ok(FrameResult {
+            estimate,
+            best_world,
+            smoothed_world,
+            theta_world,
+        })
+    }
+}
+
+/// Outputs of [`track`].
+#[derive(Clone, Debug, Default)]
+pub struct TrackOutputs {
+    /// The MCAP track.
+    pub mcap: Option<PathBuf>,
+    /// Camera image, calibration and contour topics in the MCAP.
+    pub mcap_images: bool,
+    /// The trajectory CSV.
+    pub csv: Option<PathBuf>,
+    /// A directory for overlay PNGs.
+    pub overlay: Option<PathBuf>,
+}
+
+/// What [`track`] did.
+#[derive(Clone, Debug)]
+pub struct TrackSummary {
+    /// Frames tracked.
+    pub frames: usize,
+    /// Wall-clock seconds of the tracking loop (decoding included).
+    pub seconds: f64,
+    /// Seconds spent in the filter step (edge image, propagation, likelihood).
+    pub filter_seconds: f64,
+    /// Stopped by the interrupt flag before the end of the input.
+    pub interrupted: bool,
+    /// Frames skipped as bad (index, reason).
+    pub skipped: Vec<(usize, String)>,
+    /// The trajectory (tracker-output rows).
+    pub trajectory: Trajectory,
+}
+
+/// Histogram entropy in [0, 1] → display colour (red at 1, green at 0).
+pub fn entropy_colour(h: f64) -> [f64; 3] {
+    let h = if h.is_finite() {
+        h.clamp(0.0, 1.0)
+    } else {
+        1.0
+    };
+    [h, 1.0 - h, 0.0]
+}
+
+/// The tracker-output row of a frame.
+pub fn track_row(frame: usize, time: f64, names: &[String], r: &FrameResult) -> TrajRow {
+    let e = &r.estimate;
+    TrajRow {
+        frame,
+        time,
+        action: names.get(e.map_action).cloned().unwrap_or_default(),
+        theta: e.theta_mean,
+        pose: r.smoothed_world,
+        posterior: e.action_posterior.clone(),
+        theta_std: Some(e.theta_std),
+        entropy: Some(e.theta_histogram_entropy),
+        ess: Some(e.ess),
+    }
+}
+
+/// Draws the overlay of Fig. 3: the best pose's contour and the θ̄ dot coloured by entropy.
+pub fn draw_overlay(img: &mut RgbImage, contour: &[[f64; 2]], dot: Option<([f64; 2], [f64; 3])>) {
+    let (w, h) = (i64::from(img.width()), i64::from(img.height()));
+    for p in contour {
+        let (u, v) = (p[0].round() as i64, p[1].round() as i64);
+        if (0..w).contains(&u) && (0..h).contains(&v) {
+            img.put_pixel(u as u32, v as u32, image::Rgb([255, 230, 0]));
+        }
+    }
+    if let Some(([cu, cv], c)) = dot {
+        let col = c.map(|x| (x * 255.0).round().clamp(0.0, 255.0) as u8);
+        for dv in -6i64..=6 {
+            for du in -6i64..=6 {
+                let d2 = du * du + dv * dv;
+                if d2 > 36 {
+                    continue;
+                }
+                let (u, v) = (cu.round() as i64 + du, cv.round() as i64 + dv);
+                if (0..w).contains(&u) && (0..h).contains(&v) {
+                    img.put_pixel(
+                        u as u32,
+                        v as u32,
+                        image::Rgb(if d2 > 20 { [0, 0, 0] } else { col }),
+                    );
+                }
+            }
+        }
+    }
+}
+
+fn png_bytes(img: &RgbImage) -> Result<Vec<u8>> {
+    let mut out = Vec::new();
+    image::DynamicImage::ImageRgb8(img.clone())
+        .write_to(&mut std::io::Cursor::new(&mut out), image::ImageFormat::Png)
+        .map_err(|e| Error::Config(format!("cannot encode PNG: {e}")))?;
+    Ok(out)
+}
+
+/// Tracks every frame of `source`, writing the requested outputs. `stop` is polled between
+/// frames: when set, the outputs are finished with the frames done so far. `progress` is called
+/// after each frame with (frames done, frames in total when known).
+pub fn track(
+    model: &ActionModel,
+    scene: &Scene,
+    source: &mut FrameSource,
+    opts: &TrackOptions,
+    outputs: &TrackOutputs,
+    stop: &AtomicBool,
+    progress: &mut dyn FnMut(usize, Option<usize>),
+) -> Result<TrackSummary> {
+    let mut pipeline = Pipeline::new(model, scene, opts)?;
+    let names = pipeline.action_names().to_vec();
+    if let Some(d) = &outputs.overlay {
+        std::fs::create_dir_all(d).map_err(|e| Error::write(d, e))?;
+    }
+    let mut writer = match &outputs.mcap {
+        Some(p) => Some(TrackWriter::create(p, scene, outputs.mcap_images)?),
+        None => None,
+    };
+    let cam0 = render_camera(&scene.cameras[0]);
+    let total = source.len_hint();
+    let start = Instant::now();
+    let mut filter_seconds = 0.0;
+    let mut traj = Trajectory {
+        actions: names.clone(),
+        rows: Vec::new(),
+    };
+    let mut interrupted = false;
+    let mut cloud = Vec::new();
+    loop {
+        if stop.load(Ordering::Relaxed) {
+            interrupted = true;
+            break;
+        }
+        let Some(frame) = source.next_frame()? else {
+            break;
+        };
+        let t0 = Instant::now();
+        let r = pipeline.step(frame.index, &[&frame.image])?;
+        filter_seconds += t0.elapsed().as_secs_f64();
+        traj.rows
+            .push(track_row(frame.index, frame.time, &names, &r));
+        let need_contour = outputs.overlay.is_some() || (writer.is_some() && outputs.mcap_images);
+        let contour = if need_contour {
+            contour_points(&cam0, pipeline.geometry(), &r.best_world, opts.contour)
+        } else {
+            Vec::new()
+        };
+        let dot = scene.cameras[0]
+            .project(&r.theta_world)
+            .map(|(u, v)| ([u, v], entropy_colour(r.estimate.theta_histogram_entropy)));
+        if let Some(w) = writer.as_mut() {
+            pipeline.tracker().cloud_into(&mut cloud);
+            let parts: Vec<(usize, [f64; 3])> = cloud
+                .iter()
+                .map(|c| (c.action, scene.theta_to_world(c.theta).into()))
+                .collect();
+            let e = &r.estimate;
+            let msg = EstimateMsg {
+                frame_id: "actor".into(),
+                frame: frame.index,
+                time: frame.time,
+                actions: names.clone(),
+                action_posterior: e.action_posterior.clone(),
+                map_action: names.get(e.map_action).cloned().unwrap_or_default(),
+                theta_mean: e.theta_mean,
+                theta_std: e.theta_std,
+                theta_world: r.theta_world.into(),
+                theta_entropy: e.theta_histogram_entropy,
+                action_entropy: e.action_entropy,
+                ess: e.ess,
+                k: e.mean_k,
+                progress: e.progress,
+            };
+            let png = if outputs.mcap_images {
+                Some(png_bytes(&frame.image)?)
+            } else {
+                None
+            };
+            w.write_frame(&FrameRecord {
+                frame: frame.index,
+                time: frame.time,
+                best_pose: r.best_world,
+                smoothed_pose: r.smoothed_world,
+                particles: &parts,
+                estimate: &msg,
+                png: png.as_deref(),
+                contour: outputs.mcap_images.then_some(contour.as_slice()),
+                theta_dot: dot,
+            })?;
+        }
+        if let Some(d) = &outputs.overlay {
+            let mut img = frame.image.clone();
+            draw_overlay(&mut img, &contour, dot);
+            let p = d.join(format!("overlay_{:05}.png", frame.index));
+            img.save(&p)
+                .map_err(|e| Error::write(&p, std::io::Error::other(e.to_string())))?;
+        }
+        progress(traj.rows.len(), total);
+    }
+    if let Some(w) = writer {
+        w.finish()?;
+    }
+    if let Some(p) = &outputs.csv {
+        traj.save(p)?;
+    }
+    Ok(TrackSummary {
+        frames: traj.rows.len(),
+        seconds: start.elapsed().as_secs_f64(),
+        filter_seconds,
+        interrupted,
+        skipped: source.skipped().to_vec(),
+        trajectory: traj,
+    })
+}
