@@ -98,6 +98,14 @@ impl PyActionModel {
         Ok(PyActionModel { inner })
     }
 
+    /// Parse the text of a model file (what `to_json` returns).
+    #[classmethod]
+    fn from_json(_cls: &Bound<'_, PyType>, text: &str) -> PyResult<Self> {
+        let inner = ActionModel::from_json(std::path::Path::new("<string>"), text)
+            .map_err(|e| actrack_error(&e))?;
+        Ok(PyActionModel { inner })
+    }
+
     /// Write the model file.
     fn save(&self, path: PathBuf) -> PyResult<()> {
         self.inner.save(&path).map_err(|e| actrack_error(&e))

@@ -7,7 +7,8 @@
 //! `actrack.ActrackOSError` (an `OSError`) ([`errors`]), and releases the GIL around heavy work.
 //!
 //! Modules: [`models`] (`Hmm`, `Phmm`, `FitReport`, `ThetaEstimate`), [`io`] (`ActionModel`,
-//! `load_mocap`, `Scene`, `evaluate`).
+//! `load_mocap`, `Scene`, `evaluate`), [`tracker`] (`Tracker`, `Estimate`, `track_video`,
+//! `edge_image`, `contour_likelihood`).
 
 // pyo3 extracts arguments as owned values (`PathBuf`, `PyRef`), so by-value parameters are the
 // binding convention here, not an oversight.
@@ -19,6 +20,7 @@ pub mod convert;
 pub mod errors;
 pub mod io;
 pub mod models;
+pub mod tracker;
 
 /// The extension module `actrack._actrack`.
 #[pymodule]
@@ -35,5 +37,10 @@ fn _actrack(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<io::PyScene>()?;
     m.add_function(wrap_pyfunction!(io::load_mocap, m)?)?;
     m.add_function(wrap_pyfunction!(io::evaluate, m)?)?;
+    m.add_class::<tracker::PyTracker>()?;
+    m.add_class::<tracker::PyEstimate>()?;
+    m.add_function(wrap_pyfunction!(tracker::track_video, m)?)?;
+    m.add_function(wrap_pyfunction!(tracker::edge_image, m)?)?;
+    m.add_function(wrap_pyfunction!(tracker::contour_likelihood, m)?)?;
     Ok(())
 }

@@ -26,3 +26,24 @@ def spd(rng: np.random.Generator, d: int, scale: float = 1.0) -> np.ndarray:
 @pytest.fixture
 def rng() -> np.random.Generator:
     return np.random.default_rng(12345)
+
+
+def write_y4m(path, frames: np.ndarray, fps: int = 30) -> None:
+    """Write (T, H, W) uint8 grey frames as a monochrome y4m video."""
+    t, h, w = frames.shape
+    with open(path, "wb") as f:
+        f.write(f"YUV4MPEG2 W{w} H{h} F{fps}:1 Ip A1:1 Cmono\n".encode())
+        for frame in frames:
+            f.write(b"FRAME\n")
+            f.write(np.ascontiguousarray(frame, dtype=np.uint8).tobytes())
+
+
+def synthetic_frames(n: int, width: int = 160, height: int = 120, seed: int = 0) -> np.ndarray:
+    """(n, H, W) grey frames: a textured background with a bright bar sweeping across."""
+    rng = np.random.default_rng(seed)
+    base = rng.integers(60, 120, size=(height, width)).astype(np.uint8)
+    frames = np.repeat(base[None], n, axis=0)
+    for k in range(n):
+        x = int(20 + k * (width - 40) / max(n - 1, 1))
+        frames[k, height // 3 : 2 * height // 3, x : x + 6] = 230
+    return frames

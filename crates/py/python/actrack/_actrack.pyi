@@ -2,6 +2,7 @@
 ``crates/py/tests/test_stubs.py``)."""
 
 import os
+from collections.abc import Iterable, Sequence
 from typing import Any, Literal, final
 
 import numpy as np
@@ -215,6 +216,8 @@ class ActionModel:
     ) -> ActionModel: ...
     @classmethod
     def load(cls, path: _Path) -> ActionModel: ...
+    @classmethod
+    def from_json(cls, text: str) -> ActionModel: ...
     def save(self, path: _Path) -> None: ...
     def to_json(self) -> str: ...
     @property
@@ -259,3 +262,72 @@ def load_mocap(
     max_gap: int = 10,
 ) -> dict[str, _F64]: ...
 def evaluate(track: _Path, truth: _Path) -> dict[str, Any]: ...
+
+@final
+class Estimate:
+    """One frame's estimate of the tracker."""
+
+    @property
+    def frame(self) -> int: ...
+    @property
+    def action_posterior(self) -> dict[str, float]: ...
+    @property
+    def action(self) -> str: ...
+    @property
+    def theta_mean(self) -> _F64: ...
+    @property
+    def theta_std(self) -> _F64: ...
+    @property
+    def theta_world(self) -> _F64: ...
+    @property
+    def entropy(self) -> float: ...
+    @property
+    def ess(self) -> float: ...
+    @property
+    def progress(self) -> float: ...
+    @property
+    def degenerate(self) -> bool: ...
+    @property
+    def best_pose(self) -> _F64: ...
+    @property
+    def smoothed_pose(self) -> _F64: ...
+
+@final
+class Tracker:
+    """The action-space particle filter of an action model in a scene."""
+
+    def __new__(
+        cls, model: ActionModel, scene: Scene, *, n_particles: int = 400, seed: int = 0
+    ) -> Tracker: ...
+    @property
+    def actions(self) -> list[str]: ...
+    def step(self, frame: npt.NDArray[np.uint8] | Sequence[npt.NDArray[np.uint8]]) -> Estimate: ...
+    def track(self, frames: Iterable[npt.NDArray[np.uint8]]) -> dict[str, npt.NDArray[Any]]: ...
+
+def track_video(
+    model: ActionModel,
+    scene: Scene,
+    source: _Path,
+    *,
+    mcap: _Path | None = None,
+    csv: _Path | None = None,
+    mcap_images: bool = False,
+    n_particles: int = 400,
+    seed: int = 0,
+    fps: float | None = None,
+) -> dict[str, Any]: ...
+def edge_image(
+    frame: npt.NDArray[np.uint8],
+    *,
+    sigma: float | None = None,
+    tau: float | None = None,
+    binary: bool | None = None,
+) -> npt.NDArray[np.float32]: ...
+def contour_likelihood(
+    scene: Scene,
+    edges: _ArrayLike | Sequence[_ArrayLike],
+    poses: _ArrayLike,
+    *,
+    model: ActionModel | None = None,
+    arm_lengths: tuple[float, float] | None = None,
+) -> _F64: ...
