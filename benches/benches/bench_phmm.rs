@@ -41,7 +41,11 @@ fn workload() -> (Vec<DMatrix<f64>>, Vec<DVector<f64>>) {
 }
 
 fn fit(seqs: &[DMatrix<f64>], thetas: &[DVector<f64>]) -> Phmm {
-    let params = PhmmParams::new(N_STATES).max_iterations(ITERATIONS).tolerance(0.0).check().unwrap();
+    let params = PhmmParams::new(N_STATES)
+        .max_iterations(ITERATIONS)
+        .tolerance(0.0)
+        .check()
+        .unwrap();
     let (model, report) = params.fit(seqs, thetas).unwrap();
     assert_eq!(report.iterations, ITERATIONS);
     model
@@ -51,16 +55,36 @@ fn bench_phmm(c: &mut Criterion) {
     let (seqs, thetas) = workload();
     let mut g = c.benchmark_group("phmm_fit_40states_9d_full_20x110_20iter");
     g.sample_size(10);
-    let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
-    g.bench_function("one_thread", |b| b.iter(|| one.install(|| fit(black_box(&seqs), black_box(&thetas)))));
-    g.bench_function("default_threads", |b| b.iter(|| fit(black_box(&seqs), black_box(&thetas))));
+    g.measurement_time(std::time::Duration::from_secs(8));
+    let one = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    g.bench_function("one_thread", |b| {
+        b.iter(|| one.install(|| fit(black_box(&seqs), black_box(&thetas))))
+    });
+    g.bench_function("default_threads", |b| {
+        b.iter(|| fit(black_box(&seqs), black_box(&thetas)))
+    });
     g.finish();
 
     let model = fit(&seqs, &thetas);
     let th = [0.3, -0.4];
     let mut g = c.benchmark_group("phmm_forward_40states_9d_110frames");
-    g.bench_function("log_likelihood", |b| b.iter(|| model.log_likelihood(black_box(&seqs[0]), black_box(&th)).unwrap()));
-    g.bench_function("posteriors", |b| b.iter(|| model.posteriors(black_box(&seqs[0]), black_box(&th)).unwrap()));
+    g.bench_function("log_likelihood", |b| {
+        b.iter(|| {
+            model
+                .log_likelihood(black_box(&seqs[0]), black_box(&th))
+                .unwrap()
+        })
+    });
+    g.bench_function("posteriors", |b| {
+        b.iter(|| {
+            model
+                .posteriors(black_box(&seqs[0]), black_box(&th))
+                .unwrap()
+        })
+    });
     g.finish();
 }
 
