@@ -10,7 +10,7 @@
 //! states = 20
 //! max_jump = 3
 //! iterations = 50
-//! cov_floor = 0.005    # metres (σ_min)
+//! cov_floor = 0.001    # metres (σ_min)
 //!
 //! [preprocessing]      # all optional (defaults shown)
 //! frame_rate = 30      # Hz, or "capture" to keep the capture rate
@@ -60,7 +60,7 @@ impl Default for TrainOptions {
             states: 20,
             max_jump: 3,
             iterations: 50,
-            cov_floor: 0.005,
+            cov_floor: 0.001,
             tolerance: 1e-4,
         }
     }

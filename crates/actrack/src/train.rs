@@ -1,6 +1,7 @@
 //! Training action models from mocap trials, and recognising actions of whole or partial trials
 //! without video (Wilson & Bobick: per action, the likelihood at its EM-estimated θ).
 
+use std::fmt::Write as _;
 use std::path::Path;
 
 use actrack_phmm::{EndMode, Phmm, PhmmParams, ThetaEmOptions};
@@ -225,6 +226,8 @@ pub struct Classifier<'a> {
     model: &'a ActionModel,
     /// Models without exit modelling, for sequences cut before their end.
     truncated: Vec<Phmm>,
+    /// Also start θ-EM from every distinct training θ of whole sequences (slower).
+    pub multi_start: bool,
 }
 
 impl<'a> Classifier<'a> {
@@ -240,7 +243,11 @@ impl<'a> Classifier<'a> {
                 })
             })
             .collect::<Result<_>>()?;
-        Ok(Classifier { model, truncated })
+        Ok(Classifier {
+            model,
+            truncated,
+            multi_start: false,
+        })
     }
 
     /// Classifies a sequence (T × 9, actor frame). `partial`: the sequence is the beginning of
@@ -262,12 +269,39 @@ impl<'a> Classifier<'a> {
                     2,
                     &[c[0][0].max(1e-4), c[0][1], c[1][0], c[1][1].max(1e-4)],
                 );
-                let opts = ThetaEmOptions {
-                    init: Some(mean.clone()),
-                    prior: Some((mean, prior_cov)),
-                    ..ThetaEmOptions::default()
-                };
-                trunc.estimate_theta(x, &opts).map_err(err)?
+                // Multi-start over a 3 × 3 grid spanning the training θ (and the mean): early
+                // frames leave the θ posterior multi-modal. Keep the best log-posterior.
+                let inv = prior_cov
+                    .clone()
+                    .try_inverse()
+                    .unwrap_or_else(|| DMatrix::identity(2, 2));
+                let mut starts = vec![mean.clone()];
+                for fx in [0.0, 0.5, 1.0] {
+                    for fy in [0.0, 0.5, 1.0] {
+                        starts.push(DVector::from_row_slice(&[
+                            a.theta_min[0] + fx * (a.theta_max[0] - a.theta_min[0]),
+                            a.theta_min[1] + fy * (a.theta_max[1] - a.theta_min[1]),
+                        ]));
+                    }
+                }
+                let mut best: Option<(f64, actrack_phmm::ThetaEstimate)> = None;
+                for init in starts {
+                    let opts = ThetaEmOptions {
+                        init: Some(init),
+                        prior: Some((mean.clone(), prior_cov.clone())),
+                        ..ThetaEmOptions::default()
+                    };
+                    let est = trunc.estimate_theta(x, &opts).map_err(err)?;
+                    let d = &est.theta - &mean;
+                    let objective = est.log_likelihood - 0.5 * (d.transpose() * &inv * &d)[(0, 0)];
+                    if best.as_ref().is_none_or(|(o, _)| objective > *o) {
+                        best = Some((objective, est));
+                    }
+                }
+                match best {
+                    Some((_, est)) => est,
+                    None => return Err(Error::Config("no θ start".into())),
+                }
             } else {
                 a.phmm
                     .estimate_theta(x, &ThetaEmOptions::default())
@@ -346,19 +380,36 @@ pub struct TrialResult {
     pub theta_error: f64,
 }
 
-/// Classifies the first `fraction` of each labelled trial.
+/// What a fraction of a trial is a fraction of.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum FractionOf {
+    /// Of the movement (the trimmed trial the models see).
+    Movement,
+    /// Of the whole recording, rest phases included (what a tracker started with the recording
+    /// sees).
+    Recording,
+}
+
+/// Classifies the first `fraction` of each labelled trial. A sequence cut before the end of
+/// the movement is classified as partial (see [`Classifier::classify`]).
 pub fn evaluate(
     classifier: &Classifier<'_>,
     trials: &[LabelledTrial],
     fraction: f64,
+    of: FractionOf,
 ) -> Result<Vec<TrialResult>> {
     trials
         .par_iter()
         .map(|t| {
             let x = t.trial.arm_trajectory.to_matrix();
-            let n = ((x.nrows() as f64 * fraction).ceil() as usize).clamp(2, x.nrows());
+            let n = match of {
+                FractionOf::Movement => ((x.nrows() as f64 * fraction).ceil() as usize)
+                    .clamp(2.min(x.nrows()), x.nrows()),
+                FractionOf::Recording => t.trial.frames_within_recording(fraction),
+            };
+            let partial = n < x.nrows();
             let x = x.rows(0, n).into_owned();
-            let partial = fraction < 1.0;
             let result = classifier.classify(&x, partial)?;
             let own = result.scores.iter().find(|s| s.action == t.action);
             let theta_error = own.map_or(f64::NAN, |s| {
@@ -407,13 +458,13 @@ pub fn format_confusion(m: &[Vec<usize>], actions: &[&str]) -> String {
     let w = actions.iter().map(|a| a.len()).max().unwrap_or(4).max(6);
     let mut s = format!("{:w$}", "true \\ pred");
     for a in actions {
-        s.push_str(&format!("  {a:>w$}"));
+        let _ = write!(s, "  {a:>w$}");
     }
     s.push('\n');
     for (k, row) in m.iter().enumerate() {
-        s.push_str(&format!("{:w$}", actions[k]));
+        let _ = write!(s, "{:w$}", actions[k]);
         for c in row {
-            s.push_str(&format!("  {c:>w$}"));
+            let _ = write!(s, "  {c:>w$}");
         }
         s.push('\n');
     }

@@ -1,8 +1,65 @@
 //! `actrack-cli`: the command-line interface of actrack.
+//!
+//! `main` returns an exit code: 0 success, 1 runtime failure, 2 bad usage or invalid input (an
+//! [`actrack::Error`] that [`actrack::Error::is_input_error`] calls the user's input). Errors are
+//! printed once, with their causes (`{:#}`). One module per command in `cmd/`.
 
 use std::process::ExitCode;
 
+use clap::{Parser, Subcommand};
+
+mod cmd;
+
+/// Track a human arm in video by tracking the action it performs.
+#[derive(Debug, Parser)]
+#[command(name = "actrack-cli", version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+/// The commands.
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Train action models (one parametric HMM per action) from mocap trials listed in a manifest.
+    Train(cmd::train::Args),
+    /// Recognise the action and its θ of mocap trials with a model (no video).
+    Classify(cmd::classify::Args),
+    /// Summarise a model file.
+    Inspect(cmd::inspect::Args),
+}
+
+fn run(cli: Cli) -> anyhow::Result<ExitCode> {
+    match cli.command {
+        Command::Train(a) => cmd::train::run(&a),
+        Command::Classify(a) => cmd::classify::run(&a),
+        Command::Inspect(a) => cmd::inspect::run(&a),
+    }
+}
+
+/// 2 when the error chain holds an input error of the library, else 1.
+fn exit_code_of(e: &anyhow::Error) -> u8 {
+    let input = e.chain().any(|c| {
+        c.downcast_ref::<actrack::Error>().is_some_and(actrack::Error::is_input_error)
+            || c.downcast_ref::<cmd::UsageError>().is_some()
+    });
+    if input { 2 } else { 1 }
+}
+
 fn main() -> ExitCode {
-    eprintln!("actrack-cli: no commands are implemented yet (see the project's open issues)");
-    ExitCode::from(1)
+    let cli = match Cli::try_parse() {
+        Ok(c) => c,
+        Err(e) => {
+            let code = if e.use_stderr() { 2 } else { 0 };
+            let _ = e.print();
+            return ExitCode::from(code);
+        }
+    };
+    match run(cli) {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::from(exit_code_of(&e))
+        }
+    }
 }

@@ -38,9 +38,11 @@ pub fn parse_c3d(path: &Path, bytes: &[u8], wanted: Option<&[String]>) -> Result
         ));
     }
     let owned = bytes.to_vec();
-    let parsed = std::panic::catch_unwind(move || c3dio::C3d::from_bytes(&owned))
-        .map_err(|_| Error::invalid(path, "malformed C3D file (the C3D parser gave up)"))?
-        .map_err(|e| Error::invalid(path, format!("malformed C3D file: {e:?}")))?;
+    let parsed = std::panic::catch_unwind(move || {
+        c3dio::C3d::from_bytes(&owned).map_err(|e| format!("{e:?}"))
+    })
+    .map_err(|_| Error::invalid(path, "malformed C3D file (the C3D parser gave up)"))?
+    .map_err(|e| Error::invalid(path, format!("malformed C3D file: {e}")))?;
     let points = &parsed.points;
     let unit: String = points
         .units

@@ -32,7 +32,7 @@ pub fn expand(pattern: &Path) -> Vec<PathBuf> {
                         continue;
                     };
                     let mut names: Vec<String> = entries
-                        .filter_map(|e| e.ok())
+                        .filter_map(Result::ok)
                         .map(|e| e.file_name().to_string_lossy().into_owned())
                         .filter(|n| {
                             !n.starts_with('.') && matches(&pat, &n.chars().collect::<Vec<_>>())

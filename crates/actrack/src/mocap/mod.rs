@@ -28,6 +28,9 @@ pub mod markerset;
 pub mod trial;
 pub mod vicon;
 
+#[cfg(test)]
+mod fuzz_tests;
+
 use std::io::Read;
 use std::path::{Path, PathBuf};
 
@@ -203,6 +206,7 @@ impl ArmTrajectory {
     }
 
     /// Frames `range` only.
+    #[must_use]
     pub fn slice(&self, range: std::ops::Range<usize>) -> ArmTrajectory {
         ArmTrajectory {
             rate: self.rate,

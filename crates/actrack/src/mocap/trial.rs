@@ -123,6 +123,25 @@ pub struct Trial {
     pub frame: ActorFrame,
     /// Median upper-arm |q − p| and elbow→fingertip |r − q| lengths over the trial (metres).
     pub arm_lengths: [f64; 2],
+    /// Seconds of the recording cut before the first kept frame (rest trimmed at onset).
+    pub onset: f64,
+    /// Duration of the whole recording (after reconstruction), seconds.
+    pub recording_duration: f64,
+}
+
+impl Trial {
+    /// Number of PHMM frames within the first `fraction` of the *recording* (rest phases
+    /// included), at least 2.
+    pub fn frames_within_recording(&self, fraction: f64) -> usize {
+        let cut = fraction * self.recording_duration - self.onset;
+        let n = self.arm_trajectory.len();
+        let k = (cut * self.arm_trajectory.rate + 1e-9).floor();
+        if k < 1.0 {
+            2.min(n)
+        } else {
+            ((k as usize) + 1).clamp(2.min(n), n)
+        }
+    }
 }
 
 /// Imports trials, caching each static calibration (a subject's 30 trials share one).
@@ -221,9 +240,13 @@ impl Importer {
         gaps: Vec<GapReport>,
         frame: ActorFrame,
     ) -> Result<Trial> {
-        let arm = match self.options.trim {
-            Some(t) => trim_rest(&arm, t),
-            None => arm,
+        let recording_duration = (arm.len().max(1) - 1) as f64 / arm.rate;
+        let (arm, onset) = match self.options.trim {
+            Some(t) => {
+                let (trimmed, first) = trim_rest_range(&arm, t);
+                (trimmed, first as f64 / arm.rate)
+            }
+            None => (arm, 0.0),
         };
         let arm = match self.options.frame_rate {
             Some(f) => resample(&arm, f),
@@ -259,6 +282,8 @@ impl Importer {
             gaps,
             frame,
             arm_lengths,
+            onset,
+            recording_duration,
         })
     }
 }
@@ -358,14 +383,19 @@ pub fn fingertip_speed(arm: &ArmTrajectory) -> Vec<f64> {
 /// Cuts the rest phases at onset and offset: keeps from the first to the last frame whose
 /// fingertip speed exceeds the threshold (plus the margin). A trial that never moves is kept.
 pub fn trim_rest(arm: &ArmTrajectory, opts: TrimOptions) -> ArmTrajectory {
+    trim_rest_range(arm, opts).0
+}
+
+/// [`trim_rest`], also returning the index of the first kept frame.
+pub fn trim_rest_range(arm: &ArmTrajectory, opts: TrimOptions) -> (ArmTrajectory, usize) {
     let v = fingertip_speed(arm);
     let Some(first) = v.iter().position(|&s| s > opts.speed) else {
-        return arm.clone();
+        return (arm.clone(), 0);
     };
     let last = v.iter().rposition(|&s| s > opts.speed).unwrap_or(first);
     let a = first.saturating_sub(opts.margin);
     let b = (last + opts.margin).min(arm.len() - 1);
-    arm.slice(a..b + 1)
+    (arm.slice(a..b + 1), a)
 }
 
 /// Linear resampling to `rate` Hz, from the first frame to the last whole sample.
@@ -449,7 +479,7 @@ mod tests {
         let ext = theta_by_rule(&a, ThetaRule::MaxExtension);
         let last = theta_by_rule(&a, ThetaRule::LastFrame);
         assert!((last[0] - 0.39).abs() < 1e-12);
-        assert!(ext[0] > 0.38);
+        assert!((ext[0] - 0.2).abs() < 1e-12 && (ext[1] - 0.5).abs() < 1e-12);
         let tr = trim_rest(
             &a,
             TrimOptions {

@@ -189,7 +189,7 @@ pub fn parse_vicon_csv(path: &Path, text: &str, wanted: Option<&[String]>) -> Re
             Error::parse(
                 path,
                 ln,
-                format!("frame number `{}` is not an integer", frame_field),
+                format!("frame number `{frame_field}` is not an integer"),
             )
         })?;
         if let Some(p) = prev_frame
@@ -296,6 +296,7 @@ fn truncate(s: &str) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::fmt::Write as _;
 
     pub(crate) fn sample() -> String {
         let mut s = String::from(
@@ -307,7 +308,7 @@ mod tests {
             } else {
                 format!("{f},0,0")
             };
-            s.push_str(&format!("{f},0,{f}000,0,0,{b}\n"));
+            let _ = writeln!(s, "{f},0,{f}000,0,0,{b}");
         }
         s.push('\n');
         s
