@@ -108,3 +108,12 @@ def test_malformed_file_is_a_value_error(tmp_path):
     other.write_text('{"format": "actrack-phmm", "version": 99, "model": {}}')
     with pytest.raises(actrack.ActrackError, match="unsupported actrack-phmm version 99"):
         actrack.Phmm.load(other)
+
+
+def test_nan_in_training_data_names_the_sequence():
+    seqs = [np.random.default_rng(k).normal(size=(20, 2)) for k in range(3)]
+    seqs[1][4, 0] = np.nan
+    with pytest.raises(actrack.ActrackError, match=r"non-finite value NaN in sequence 1 at row 4"):
+        actrack.Hmm.fit(seqs, n_states=2)
+    with pytest.raises(actrack.ActrackError, match=r"non-finite"):
+        actrack.Phmm.fit(seqs, [[0.0, 0.0], [1.0, 0.0], [np.nan, 1.0]], n_states=2)
