@@ -149,18 +149,24 @@ impl PyActionModel {
     }
 
     /// Recognise the action of a (T, 9) pose sequence (actor frame, metres): for each action,
-    /// θ̂ by EM and log P(X | θ̂). `partial=True` for the beginning of an action only. Returns
+    /// θ̂ by EM and log P(X | θ̂). `partial=True` for the beginning of an action only;
+    /// `multi_start=True` also starts θ-EM from every training θ (slower). Returns
     /// `{"action": name, "theta": θ̂, "scores": {name: {"log_likelihood": …, "theta": …}}}`.
-    #[pyo3(signature = (x, *, partial=false))]
+    #[pyo3(signature = (x, *, partial=false, multi_start=false))]
     fn classify<'py>(
         &self,
         py: Python<'py>,
         x: &Bound<'_, PyAny>,
         partial: bool,
+        multi_start: bool,
     ) -> PyResult<Bound<'py, PyDict>> {
         let x = matrix(x, "x", Some(9))?;
         let result = py
-            .detach(|| Classifier::new(&self.inner)?.classify(&x, partial))
+            .detach(|| {
+                let mut c = Classifier::new(&self.inner)?;
+                c.multi_start = multi_start;
+                c.classify(&x, partial)
+            })
             .map_err(|e| actrack_error(&e))?;
         let out = PyDict::new(py);
         out.set_item("action", &result.action)?;

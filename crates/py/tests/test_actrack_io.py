@@ -107,6 +107,9 @@ def test_train_classify_and_files(model, manifest, tmp_path):
         assert result["action"] == action
         assert set(result["scores"]) == {"reach", "point"}
         assert np.abs(result["theta"] - [0.08, 0.42]).max() < 0.05
+        assert again.classify(x, multi_start=True)["action"] == action
+        early = again.classify(x[: len(x) // 2], partial=True)
+        assert set(early["scores"]) == {"reach", "point"}
 
 
 def test_scene_round_trip(tmp_path):
