@@ -67,7 +67,7 @@ fn trial_csv(action: &str, theta: [f64; 2], len: usize, seed: f64) -> String {
 }
 
 fn write_demo(dir: &Path) {
-    std::fs::create_dir_all(dir.join("data")).unwrap();
+    std::fs::create_dir_all(dir.join("data")).expect("create data dir");
     let mut k = 0;
     for action in ["reach", "drink"] {
         for (i, x) in [-0.2, -0.1, 0.0, 0.1].iter().enumerate() {
@@ -78,13 +78,13 @@ fn write_demo(dir: &Path) {
                     dir.join(name),
                     trial_csv(action, [*x, *y], len, f64::from(k)),
                 )
-                .unwrap();
+                .expect("write trial");
                 k += 1;
             }
         }
     }
     let manifest = "[options]\nstates = 6\niterations = 20\ncov_floor = 0.003\n\n[preprocessing]\ntrim = false\nframe_rate = \"capture\"\n\n[[trials]]\nfiles = \"data/reach_*.csv\"\naction = \"reach\"\n\n[[trials]]\nfiles = \"data/drink_*.csv\"\naction = \"drink\"\n";
-    std::fs::write(dir.join("train.toml"), manifest).unwrap();
+    std::fs::write(dir.join("train.toml"), manifest).expect("write manifest");
 }
 
 #[test]
