@@ -47,7 +47,11 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
     if let Some(f) = args.cov_floor {
         options.cov_floor = f;
     }
-    if options.states == 0 || options.max_jump == 0 || !(options.cov_floor > 0.0) {
+    if options.states == 0
+        || options.max_jump == 0
+        || options.cov_floor.is_nan()
+        || options.cov_floor <= 0.0
+    {
         return Err(super::UsageError(
             "--states and --max-jump must be ≥ 1 and --cov-floor > 0".into(),
         )
