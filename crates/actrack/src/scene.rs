@@ -637,12 +637,14 @@ fn camera_from_toml(c: &CameraToml, i: usize, path: &Path) -> Result<Camera> {
 
 /// A default synthetic scene: a 60 × 24 cm table region at 0.75 m, the actor's shoulder 0.35 m
 /// above it, 0.40 m before and 0.05 m to the right of the region's centre (every corner within
-/// reach of a 0.29 + 0.45 m arm), one camera of `width`×`height` looking at the workspace from
-/// the actor's front right.
+/// reach of a 0.29 + 0.45 m arm), one camera of `width`×`height` looking down at the workspace
+/// from above.
 pub fn default_scene(width: u32, height: u32) -> Scene {
     let f = 0.9 * f64::from(width);
-    let eye = Vector3::new(0.85, 1.25, 1.55);
-    let target = Vector3::new(0.0, 0.35, 0.9);
+    // High above the far side of the table, looking down at the workspace: the table plane
+    // (where θ lives) is seen nearly face-on, which makes both components of θ observable.
+    let eye = Vector3::new(0.2, 0.5, 2.4);
+    let target = Vector3::new(0.0, 0.35, 0.8);
     let (r_cw, t_cw) =
         look_at(eye, target, Vector3::z()).unwrap_or((Matrix3::identity(), Vector3::zeros()));
     Scene {

@@ -1,0 +1,123 @@
+//! `actrack-cli synth -o DIR [--scene S] [--model M] --action point@-0.1,0.45 --action push …`.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use actrack::model::ActionModel;
+use actrack::scene::{Scene, default_scene};
+use actrack::synth::{MotionSource, random_targets, render_frames, save_frames, sequence};
+
+/// Options of `synth`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Output directory: `frames/frame_00000.png …`, `truth.csv` (and `scene.toml` when the
+    /// built-in scene is used, `video.y4m` with --y4m).
+    #[arg(long, short = 'o')]
+    pub output: PathBuf,
+    /// The scene file (default: a built-in one-camera table scene, written to the output).
+    #[arg(long, short = 's')]
+    pub scene: Option<PathBuf>,
+    /// Sample the movements from this action model (default: the built-in minimum-jerk
+    /// generator, which knows point, reach and push).
+    #[arg(long, short = 'm')]
+    pub model: Option<PathBuf>,
+    /// An action, optionally with its θ in the actor frame in metres: `point` or
+    /// `point@-0.1,0.45`; repeat for several actions in a row. Without θ, a random target in the
+    /// table region.
+    #[arg(long = "action", short = 'a', required = true)]
+    pub actions: Vec<String>,
+    /// Seed of the movements, targets and rendering.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Frame rate of the truth's time column.
+    #[arg(long, default_value_t = 30.0)]
+    pub fps: f64,
+    /// Frame size WxH of the built-in scene.
+    #[arg(long, default_value = "320x240")]
+    pub size: String,
+    /// Also write the frames as `video.y4m`.
+    #[arg(long)]
+    pub y4m: bool,
+}
+
+fn parse_action(s: &str) -> Result<(String, Option<[f64; 2]>), String> {
+    let Some((name, theta)) = s.split_once('@') else {
+        return Ok((s.to_string(), None));
+    };
+    let v: Vec<f64> = theta
+        .split(',')
+        .map(|x| x.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| {
+            format!("--action {s}: θ must be two numbers in metres, e.g. {name}@-0.1,0.45")
+        })?;
+    if v.len() != 2 || !v.iter().all(|x| x.is_finite()) {
+        return Err(format!(
+            "--action {s}: θ must be two numbers in metres, e.g. {name}@-0.1,0.45"
+        ));
+    }
+    Ok((name.to_string(), Some([v[0], v[1]])))
+}
+
+/// Runs `synth`.
+pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
+    if !(args.fps.is_finite() && args.fps > 0.0) {
+        return Err(super::UsageError("--fps must be positive".into()).into());
+    }
+    let scene = if let Some(p) = &args.scene {
+        Scene::load(p)?
+    } else {
+        {
+            let (w, h) = args
+                .size
+                .split_once('x')
+                .and_then(|(w, h)| Some((w.parse::<u32>().ok()?, h.parse::<u32>().ok()?)))
+                .filter(|(w, h)| *w >= 32 && *h >= 32)
+                .ok_or_else(|| {
+                    super::UsageError(format!("--size {}: expected WxH, e.g. 320x240", args.size))
+                })?;
+            default_scene(w, h)
+        }
+    };
+    let model = args
+        .model
+        .as_ref()
+        .map(|p| ActionModel::load(p))
+        .transpose()?;
+    let mut actions = Vec::new();
+    for (i, a) in args.actions.iter().enumerate() {
+        let (name, theta) = parse_action(a).map_err(super::UsageError)?;
+        let theta = theta.unwrap_or_else(|| {
+            random_targets(&scene, &[name.as_str()], args.seed.wrapping_add(i as u64))[0].1
+        });
+        actions.push((name, theta));
+    }
+    let source = model
+        .as_ref()
+        .map_or(MotionSource::Generator, MotionSource::Model);
+    let seq = sequence(&scene, source, &actions, args.fps, args.seed)
+        .map_err(|e| super::UsageError(e.to_string()))?;
+    let world: Vec<[f64; 9]> = seq.truth.rows.iter().map(|r| r.pose).collect();
+    let frames = render_frames(&scene, &world, seq.lengths, args.seed)?;
+    std::fs::create_dir_all(&args.output)?;
+    save_frames(&frames, &args.output.join("frames"))?;
+    seq.truth.save(&args.output.join("truth.csv"))?;
+    if args.scene.is_none() {
+        std::fs::write(args.output.join("scene.toml"), scene.to_toml_string())?;
+    }
+    if args.y4m {
+        let f = std::io::BufWriter::new(std::fs::File::create(args.output.join("video.y4m"))?);
+        actrack::frames::write_y4m(f, &frames, args.fps)?;
+    }
+    eprintln!(
+        "wrote {} frames of {} to {}",
+        frames.len(),
+        actions
+            .iter()
+            .map(|(a, t)| format!("{a}@{:.3},{:.3}", t[0], t[1]))
+            .collect::<Vec<_>>()
+            .join(" "),
+        args.output.display()
+    );
+    Ok(ExitCode::SUCCESS)
+}

@@ -1,0 +1,166 @@
+//! `actrack-cli track --model M --scene S --input IN -o track.mcap [--csv track.csv] …`.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use actrack::frames::{FrameOptions, FrameSource};
+use actrack::model::ActionModel;
+use actrack::pipeline::{ContourMethod, TrackOptions, TrackOutputs, track};
+use actrack::scene::Scene;
+
+/// Set by Ctrl-C / SIGTERM; the pipeline finishes the outputs with the frames done so far.
+pub static STOP: AtomicBool = AtomicBool::new(false);
+
+/// Installs the Ctrl-C / SIGTERM handler (once).
+pub fn install_stop_handler() {
+    let _ = ctrlc::set_handler(|| {
+        if STOP.swap(true, Ordering::SeqCst) {
+            // Second signal: give up at once.
+            std::process::exit(130);
+        }
+        eprintln!(
+            "\ninterrupted: finishing the outputs with the frames done so far (Ctrl-C again to abort)"
+        );
+    });
+}
+
+/// Options of `track`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// The action model file (`*.actrack.json`).
+    #[arg(long, short = 'm')]
+    pub model: PathBuf,
+    /// The scene file (TOML: cameras, table, actor). The video is from its first camera.
+    #[arg(long, short = 's')]
+    pub scene: PathBuf,
+    /// The frames: a directory of PNG/JPEG images, a `.y4m` file, `-` for y4m on stdin, or any
+    /// video ffmpeg can decode.
+    #[arg(long, short = 'i')]
+    pub input: PathBuf,
+    /// The MCAP track to write (Foxglove schemas).
+    #[arg(long, short = 'o')]
+    pub output: Option<PathBuf>,
+    /// The trajectory CSV to write.
+    #[arg(long)]
+    pub csv: Option<PathBuf>,
+    /// A directory for overlay images (best contour, θ dot coloured by entropy).
+    #[arg(long)]
+    pub overlay: Option<PathBuf>,
+    /// Also put the camera image, calibration and contour topics in the MCAP.
+    #[arg(long)]
+    pub images: bool,
+    /// Number of particles.
+    #[arg(long, default_value_t = 400)]
+    pub particles: usize,
+    /// Seed of every random draw (the result does not depend on --threads).
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Frame rate (default: the source's, or 30 for image directories).
+    #[arg(long)]
+    pub fps: Option<f64>,
+    /// Skip corrupt frames and frames of another size instead of stopping.
+    #[arg(long)]
+    pub skip_bad_frames: bool,
+    /// Contour of the likelihood: `raster` (SPEC §4.2) or `analytic` (cheaper).
+    #[arg(long, value_enum, default_value_t = ContourArg::Raster)]
+    pub contour: ContourArg,
+}
+
+/// `--contour`.
+#[derive(Debug, Clone, Copy, clap::ValueEnum)]
+pub enum ContourArg {
+    /// Rasterised silhouette boundary.
+    Raster,
+    /// Points along the projected outlines.
+    Analytic,
+}
+
+/// Runs `track`.
+pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
+    if args.output.is_none() && args.csv.is_none() && args.overlay.is_none() {
+        return Err(super::UsageError(
+            "nothing to write: give -o track.mcap, --csv track.csv and/or --overlay DIR".into(),
+        )
+        .into());
+    }
+    if args.particles == 0 {
+        return Err(super::UsageError("--particles must be ≥ 1".into()).into());
+    }
+    if let Some(n) = args.threads {
+        actrack::pipeline::set_threads(n)?;
+    }
+    let model = ActionModel::load(&args.model)?;
+    let scene = Scene::load(&args.scene)?;
+    let mut source = FrameSource::open(
+        &args.input,
+        &FrameOptions {
+            fps: args.fps,
+            skip_bad_frames: args.skip_bad_frames,
+        },
+    )?;
+    install_stop_handler();
+    let opts = TrackOptions {
+        particles: args.particles,
+        seed: args.seed,
+        contour: match args.contour {
+            ContourArg::Raster => ContourMethod::Raster,
+            ContourArg::Analytic => ContourMethod::Analytic,
+        },
+    };
+    let outputs = TrackOutputs {
+        mcap: args.output.clone(),
+        mcap_images: args.images,
+        csv: args.csv.clone(),
+        overlay: args.overlay.clone(),
+    };
+    let bar = super::frame_bar(source.len_hint());
+    let mut progress = |done: usize, _total: Option<usize>| {
+        if let Some(b) = &bar {
+            b.set_position(done as u64);
+        }
+    };
+    let summary = track(
+        &model,
+        &scene,
+        &mut source,
+        &opts,
+        &outputs,
+        &STOP,
+        &mut progress,
+    )?;
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
+    for (i, why) in &summary.skipped {
+        eprintln!("skipped frame {i}: {why}");
+    }
+    let fps = summary.frames as f64 / summary.seconds.max(1e-9);
+    eprintln!(
+        "tracked {} frames in {:.1} s ({fps:.1} frames/s, {:.1} ms/frame in the filter), {} particles",
+        summary.frames,
+        summary.seconds,
+        1000.0 * summary.filter_seconds / summary.frames.max(1) as f64,
+        args.particles
+    );
+    for (what, p) in [
+        ("MCAP", &args.output),
+        ("CSV", &args.csv),
+        ("overlays", &args.overlay),
+    ] {
+        if let Some(p) = p {
+            eprintln!("{what}: {}", p.display());
+        }
+    }
+    if summary.interrupted {
+        eprintln!(
+            "interrupted after {} frames: the outputs hold the frames done so far",
+            summary.frames
+        );
+        return Ok(ExitCode::from(130));
+    }
+    Ok(ExitCode::SUCCESS)
+}

@@ -1,0 +1,381 @@
+//! End-to-end tests of `synth`, `track` and `eval` through the binary: the MCAP validated by the
+//! official `mcap` Python package, y4m on stdin against an image directory, an mp4 through
+//! ffmpeg, bad input (exit code 2, the frame named) and interruption.
+#![allow(clippy::unwrap_used)]
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::sync::OnceLock;
+
+const BIN: &str = env!("CARGO_BIN_EXE_actrack-cli");
+
+struct Fixture {
+    _dir: tempfile::TempDir,
+    root: PathBuf,
+}
+
+/// A small model (generator demonstrations), the built-in scene at 160×120 and a 2-action video.
+fn fixture() -> &'static Fixture {
+    static F: OnceLock<Fixture> = OnceLock::new();
+    F.get_or_init(|| {
+        let dir = tempfile::tempdir().unwrap();
+        let root = dir.path().to_path_buf();
+        let scene = actrack::scene::default_scene(160, 120);
+        std::fs::write(root.join("scene.toml"), scene.to_toml_string()).unwrap();
+        let (model, _) =
+            actrack::demo::train_generator_model(&scene, &["point", "push"], 2, 12, 3).unwrap();
+        model.save(&root.join("model.actrack.json")).unwrap();
+        let out = Command::new(BIN)
+            .args([
+                "synth",
+                "--scene",
+                "scene.toml",
+                "-o",
+                "video",
+                "--action",
+                "point@-0.1,0.42",
+                "--action",
+                "push",
+                "--seed",
+                "5",
+                "--y4m",
+            ])
+            .current_dir(&root)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        Fixture { _dir: dir, root }
+    })
+}
+
+fn track(root: &Path, input: &str, extra: &[&str], stdin: Option<&Path>) -> std::process::Output {
+    let mut c = Command::new(BIN);
+    c.args([
+        "track",
+        "--model",
+        "model.actrack.json",
+        "--scene",
+        "scene.toml",
+        "--input",
+        input,
+        "--particles",
+        "60",
+        "--seed",
+        "2",
+    ])
+    .args(extra)
+    .current_dir(root);
+    if let Some(p) = stdin {
+        c.stdin(Stdio::from(std::fs::File::open(p).unwrap()));
+    }
+    c.output().unwrap()
+}
+
+fn python_has_mcap() -> bool {
+    Command::new("python3")
+        .args(["-c", "import mcap, jsonschema"])
+        .status()
+        .is_ok_and(|s| s.success())
+}
+
+#[test]
+fn track_writes_valid_mcap_and_csv_then_eval() {
+    let f = fixture();
+    let out = track(
+        &f.root,
+        "video/frames",
+        &[
+            "-o",
+            "t.mcap",
+            "--csv",
+            "t.csv",
+            "--images",
+            "--overlay",
+            "ov",
+        ],
+        None,
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let n = std::fs::read_dir(f.root.join("video/frames"))
+        .unwrap()
+        .count();
+    assert_eq!(std::fs::read_dir(f.root.join("ov")).unwrap().count(), n);
+    // No temporary files left behind.
+    assert!(std::fs::read_dir(&f.root).unwrap().flatten().all(|e| {
+        let n = e.file_name().to_string_lossy().into_owned();
+        !(n.starts_with(".t.mcap.tmp-") || n.starts_with(".t.csv.tmp-"))
+    }));
+    if python_has_mcap() {
+        let script =
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/python/validate_mcap.py");
+        let v = Command::new("python3")
+            .arg(script)
+            .arg(f.root.join("t.mcap"))
+            .args(["--expect-frames", &n.to_string()])
+            .output()
+            .unwrap();
+        assert!(
+            v.status.success(),
+            "{}\n{}",
+            String::from_utf8_lossy(&v.stdout),
+            String::from_utf8_lossy(&v.stderr)
+        );
+    } else {
+        eprintln!("note: python3 with `mcap` and `jsonschema` not found; MCAP validation skipped");
+    }
+    let e = Command::new(BIN)
+        .args([
+            "eval",
+            "--track",
+            "t.csv",
+            "--truth",
+            "video/truth.csv",
+            "--json",
+            "--plots",
+            "plots",
+        ])
+        .current_dir(&f.root)
+        .output()
+        .unwrap();
+    assert!(e.status.success(), "{}", String::from_utf8_lossy(&e.stderr));
+    let j: serde_json::Value = serde_json::from_slice(&e.stdout).unwrap();
+    assert_eq!(j["instances"].as_array().unwrap().len(), 2);
+    assert!(j["overall"]["rmse"].as_f64().unwrap().is_finite());
+    for p in ["posterior.png", "theta.png", "fingertip.png"] {
+        assert!(f.root.join("plots").join(p).exists());
+    }
+}
+
+#[test]
+fn y4m_on_stdin_equals_image_directory() {
+    let f = fixture();
+    // Grey frames make y4m (Cmono) lossless: write a grey copy of the video both ways.
+    let grey = f.root.join("grey");
+    std::fs::create_dir_all(&grey).unwrap();
+    let mut frames = Vec::new();
+    for p in actrack::frames::list_images(&f.root.join("video/frames")).unwrap() {
+        let g = image::DynamicImage::ImageLuma8(image::open(&p).unwrap().to_luma8()).to_rgb8();
+        g.save(grey.join(p.file_name().unwrap())).unwrap();
+        frames.push(g);
+    }
+    actrack::frames::write_y4m(
+        std::fs::File::create(f.root.join("grey.y4m")).unwrap(),
+        &frames,
+        30.0,
+    )
+    .unwrap();
+    let a = track(&f.root, "grey", &["--csv", "a.csv"], None);
+    assert!(a.status.success(), "{}", String::from_utf8_lossy(&a.stderr));
+    let b = track(
+        &f.root,
+        "-",
+        &["--csv", "b.csv", "--threads", "1"],
+        Some(&f.root.join("grey.y4m")),
+    );
+    assert!(b.status.success(), "{}", String::from_utf8_lossy(&b.stderr));
+    let ca = std::fs::read_to_string(f.root.join("a.csv")).unwrap();
+    let cb = std::fs::read_to_string(f.root.join("b.csv")).unwrap();
+    assert_eq!(ca, cb);
+}
+
+#[test]
+fn mp4_through_ffmpeg() {
+    let f = fixture();
+    if Command::new("ffmpeg").arg("-version").output().is_err() {
+        eprintln!("note: ffmpeg is not installed; the mp4 test is skipped");
+        return;
+    }
+    let mp4 = f.root.join("video.mp4");
+    let st = Command::new("ffmpeg")
+        .args(["-v", "error", "-y", "-framerate", "30", "-i"])
+        .arg(f.root.join("video/frames/frame_%05d.png"))
+        .args(["-c:v", "libx264", "-pix_fmt", "yuv420p", "-crf", "12"])
+        .arg(&mp4)
+        .status()
+        .unwrap();
+    if !st.success() {
+        eprintln!("note: this ffmpeg cannot encode H.264; the mp4 test is skipped");
+        return;
+    }
+    let out = track(&f.root, "video.mp4", &["--csv", "mp4.csv"], None);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let n = std::fs::read_dir(f.root.join("video/frames"))
+        .unwrap()
+        .count();
+    let rows = std::fs::read_to_string(f.root.join("mp4.csv"))
+        .unwrap()
+        .lines()
+        .count()
+        - 1;
+    assert_eq!(rows, n);
+}
+
+fn expect_input_error(out: &std::process::Output, needle: &[&str]) {
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    for n in needle {
+        assert!(err.contains(n), "`{n}` not in: {err}");
+    }
+}
+
+#[test]
+fn bad_input_names_the_frame_with_exit_code_2() {
+    let f = fixture();
+    let bad = f.root.join("bad");
+    std::fs::create_dir_all(&bad).unwrap();
+    let files = actrack::frames::list_images(&f.root.join("video/frames")).unwrap();
+    for p in files.iter().take(4) {
+        std::fs::copy(p, bad.join(p.file_name().unwrap())).unwrap();
+    }
+    // Changing size.
+    image::RgbImage::new(80, 60)
+        .save(bad.join("frame_00004.png"))
+        .unwrap();
+    expect_input_error(
+        &track(&f.root, "bad", &["--csv", "x.csv"], None),
+        &["frame 4", "frame_00004.png", "differs"],
+    );
+    // Corrupt image, then skipped on request.
+    std::fs::write(bad.join("frame_00004.png"), b"garbage").unwrap();
+    expect_input_error(
+        &track(&f.root, "bad", &["--csv", "x.csv"], None),
+        &["frame 4", "corrupt"],
+    );
+    let ok = track(
+        &f.root,
+        "bad",
+        &["--csv", "x.csv", "--skip-bad-frames"],
+        None,
+    );
+    assert!(
+        ok.status.success(),
+        "{}",
+        String::from_utf8_lossy(&ok.stderr)
+    );
+    assert!(String::from_utf8_lossy(&ok.stderr).contains("skipped frame 4"));
+    assert!(
+        !f.root.join("x.csv").exists()
+            || std::fs::read_to_string(f.root.join("x.csv"))
+                .unwrap()
+                .lines()
+                .count()
+                == 5
+    );
+    // Empty directory.
+    std::fs::create_dir_all(f.root.join("empty")).unwrap();
+    expect_input_error(
+        &track(&f.root, "empty", &["--csv", "x.csv"], None),
+        &["empty", "no frames"],
+    );
+    // Truncated y4m.
+    let y = std::fs::read(f.root.join("video/video.y4m")).unwrap();
+    std::fs::write(f.root.join("cut.y4m"), &y[..y.len() - 100]).unwrap();
+    let n = files.len();
+    expect_input_error(
+        &track(&f.root, "cut.y4m", &["-o", "cut.mcap"], None),
+        &[&format!("frame {}", n - 1), "truncated"],
+    );
+    assert!(
+        !f.root.join("cut.mcap").exists(),
+        "no half-written output under the final name"
+    );
+    // Frames of another size than the scene's camera.
+    let big = f.root.join("big");
+    std::fs::create_dir_all(&big).unwrap();
+    image::RgbImage::new(200, 100)
+        .save(big.join("f0.png"))
+        .unwrap();
+    expect_input_error(
+        &track(&f.root, "big", &["--csv", "x.csv"], None),
+        &["frame 0", "camera"],
+    );
+    // A camera that does not see the table (moved 5 m behind it).
+    let mut blind = actrack::scene::default_scene(160, 120);
+    blind.cameras[0].t_cw.z -= 5.0;
+    std::fs::write(f.root.join("blind.toml"), blind.to_toml_string()).unwrap();
+    let out = Command::new(BIN)
+        .args([
+            "track",
+            "--model",
+            "model.actrack.json",
+            "--scene",
+            "blind.toml",
+            "--input",
+            "video/frames",
+            "--csv",
+            "x.csv",
+        ])
+        .current_dir(&f.root)
+        .output()
+        .unwrap();
+    expect_input_error(&out, &["blind.toml", "does not see the table"]);
+    // Missing ffmpeg-decodable file.
+    expect_input_error(
+        &track(&f.root, "nothing.mp4", &["--csv", "x.csv"], None),
+        &["nothing.mp4"],
+    );
+}
+
+#[cfg(unix)]
+#[test]
+fn sigterm_finishes_a_valid_mcap() {
+    let f = fixture();
+    // Loop the video many times through stdin so tracking is still running when signalled.
+    let y = std::fs::read(f.root.join("video/video.y4m")).unwrap();
+    let header_end = y.iter().position(|b| *b == b'\n').unwrap() + 1;
+    let mut long = y.clone();
+    for _ in 0..30 {
+        long.extend_from_slice(&y[header_end..]);
+    }
+    std::fs::write(f.root.join("long.y4m"), &long).unwrap();
+    let child = Command::new(BIN)
+        .args([
+            "track",
+            "--model",
+            "model.actrack.json",
+            "--scene",
+            "scene.toml",
+            "--input",
+            "long.y4m",
+            "-o",
+            "int.mcap",
+            "--particles",
+            "60",
+        ])
+        .current_dir(&f.root)
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(2500));
+    let _ = Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status();
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(130), "{err}");
+    assert!(err.contains("interrupted"), "{err}");
+    let bytes = std::fs::read(f.root.join("int.mcap")).unwrap();
+    assert!(bytes.len() > 100);
+    if python_has_mcap() {
+        let script =
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/python/validate_mcap.py");
+        let v = Command::new("python3")
+            .arg(script)
+            .arg(f.root.join("int.mcap"))
+            .output()
+            .unwrap();
+        assert!(v.status.success(), "{}", String::from_utf8_lossy(&v.stdout));
+    }
+}
