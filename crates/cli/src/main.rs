@@ -27,6 +27,14 @@ enum Command {
     Classify(cmd::classify::Args),
     /// Summarise a model file.
     Inspect(cmd::inspect::Args),
+    /// The embedded demo: generate, train, render, track, evaluate (no arguments needed).
+    Demo(cmd::demo::Args),
+    /// Render a synthetic video (frames + ground-truth CSV) of actions in a row.
+    Synth(cmd::synth::Args),
+    /// Track the action and the arm in a video: MCAP (Foxglove) and/or CSV, overlays.
+    Track(cmd::track::Args),
+    /// Compare a track with ground truth (SPEC §5.4 metrics, plots).
+    Eval(cmd::eval::Args),
 }
 
 fn run(cli: Cli) -> anyhow::Result<ExitCode> {
@@ -34,6 +42,10 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Train(a) => cmd::train::run(&a),
         Command::Classify(a) => cmd::classify::run(&a),
         Command::Inspect(a) => cmd::inspect::run(&a),
+        Command::Demo(a) => cmd::demo::run(&a),
+        Command::Synth(a) => cmd::synth::run(&a),
+        Command::Track(a) => cmd::track::run(&a),
+        Command::Eval(a) => cmd::eval::run(&a),
     }
 }
 

@@ -1,7 +1,11 @@
 //! One module per command.
 
 pub mod classify;
+pub mod demo;
+pub mod eval;
 pub mod inspect;
+pub mod synth;
+pub mod track;
 pub mod train;
 
 /// A usage error found by a command after parsing (exit code 2).
