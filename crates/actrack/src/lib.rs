@@ -17,6 +17,7 @@ pub mod model;
 pub mod motion;
 pub mod pipeline;
 pub mod plots;
+pub mod reproduce;
 pub mod scene;
 pub mod synth;
 pub mod track_csv;

@@ -1,0 +1,582 @@
+//! The paper's experiment on real motion (issue 9): held-out UE-ADL trials rendered into synthetic
+//! video with the scene synthesis, tracked in action space, evaluated with SPEC §5.4.
+//!
+//! * [`test_trials`] imports the held-out trials of a manifest (actor frame, trimmed, 30 fps).
+//! * [`scene_for`] builds the world: the actor's shoulder at [`SHOULDER`], the table
+//!   [`TABLE_BELOW_SHOULDER`] below it, the θ prior region the box around the *training* targets
+//!   of every action (padded by [`REGION_PAD`]), the camera(s) of the data README.
+//! * [`run_video`] renders a sequence of segments frame by frame in memory (no files), tracks it
+//!   and returns the track, the truth and the per-frame timings; [`run_condition`] does so for
+//!   every trial of a condition in parallel and evaluates the whole.
+//!
+//! Differences from [`crate::pipeline::Pipeline`]: γ is scaled by √V for V views (the render
+//! crate's note on multiple views) and the cooling ratio, contour method and clutter/noise are
+//! per condition.
+
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+use actrack_pf::{ObservationModel, TableRegion as PfRegion, Tracker, TrackerConfig};
+use actrack_render::{
+    ArmGeometry as RenderArm, ContourMethod, EdgeImage, EdgeWorkspace, ImageView, LikelihoodModel,
+    contour_points, correct_arm,
+};
+use image::RgbImage;
+use nalgebra::Vector3;
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::error::{Error, Result};
+use crate::eval::{EvalReport, evaluate};
+use crate::manifest::Manifest;
+use crate::mocap::ArmSide;
+use crate::mocap::trial::{Importer, median};
+use crate::model::ActionModel;
+use crate::pipeline::{
+    FrameResult, GAMMA, draw_overlay, edge_params, render_arm, render_camera, track_row,
+};
+use crate::scene::{ArmGeometry, Camera, Placement, Scene, Side, TableRegion, look_at};
+use crate::synth::scene_synth;
+use crate::track_csv::{TrajRow, Trajectory};
+use crate::train::{Progress, import_trials};
+
+/// World position of the actor's shoulder (the actor frame's origin; heading 0).
+pub const SHOULDER: [f64; 3] = [0.0, 0.0, 1.0];
+/// Table surface below the shoulder (UE-ADL README: 0.33 m).
+pub const TABLE_BELOW_SHOULDER: f64 = 0.33;
+/// Padding of the θ prior region around the training targets (metres).
+pub const REGION_PAD: f64 = 0.05;
+/// First camera, actor frame (data README): eye and target.
+pub const CAMERA0: ([f64; 3], [f64; 3]) = ([0.6, 1.3, 0.6], [-0.1, 0.3, -0.1]);
+/// Second camera (two-view condition), actor frame: the first mirrored to the actor's left.
+pub const CAMERA1: ([f64; 3], [f64; 3]) = ([-0.8, 1.2, 0.6], [-0.1, 0.3, -0.1]);
+/// Horizontal field of view of both cameras (degrees).
+pub const HFOV_DEG: f64 = 65.0;
+/// Frame rate of the rendered video.
+pub const FPS: f64 = 30.0;
+
+/// A held-out trial, ready to render.
+#[derive(Clone, Debug)]
+pub struct TestTrial {
+    /// File stem, e.g. `ADL008FR1`.
+    pub name: String,
+    /// Subject, e.g. `ADL008`.
+    pub subject: String,
+    /// Ground-truth action label.
+    pub action: String,
+    /// θ of the trial (actor frame, metres).
+    pub theta: [f64; 2],
+    /// Joint trajectory (p, q, r) in the actor frame, 30 fps.
+    pub poses: Vec<[f64; 9]>,
+    /// The trial's arm lengths (upper arm, elbow → fingertip; medians).
+    pub lengths: [f64; 2],
+}
+
+/// Imports the trials of `manifest` for one arm, sorted by name.
+pub fn test_trials(manifest: &Manifest, arm: ArmSide) -> Result<Vec<TestTrial>> {
+    let importer = Importer::new(manifest.preprocessing.clone())?;
+    let wanted: Vec<_> = manifest
+        .trials
+        .iter()
+        .filter(|t| t.arm == arm)
+        .cloned()
+        .collect();
+    let quiet = |_: Progress| {};
+    let imported = import_trials(&importer, &wanted, &quiet)?;
+    let mut out: Vec<TestTrial> = imported
+        .into_iter()
+        .map(|lt| {
+            let path = &lt.trial.source;
+            let name = path
+                .file_name()
+                .and_then(|s| s.to_str())
+                .map_or_else(String::new, |s| {
+                    s.split('.').next().unwrap_or(s).to_string()
+                });
+            let subject = name.chars().take(6).collect();
+            let arm = &lt.trial.arm_trajectory;
+            TestTrial {
+                name,
+                subject,
+                action: lt.action,
+                theta: lt.trial.theta,
+                poses: (0..arm.len()).map(|t| arm.pose(t)).collect(),
+                lengths: lt.trial.arm_lengths,
+            }
+        })
+        .collect();
+    out.sort_by(|a, b| a.name.cmp(&b.name));
+    Ok(out)
+}
+
+/// Median arm lengths per subject (the scene's arm geometry: measured once per actor, like a
+/// camera calibration).
+pub fn subject_lengths(trials: &[TestTrial]) -> BTreeMap<String, [f64; 2]> {
+    let mut by: BTreeMap<String, Vec<[f64; 2]>> = BTreeMap::new();
+    for t in trials {
+        by.entry(t.subject.clone()).or_default().push(t.lengths);
+    }
+    by.into_iter()
+        .map(|(s, v)| {
+            let l = [0, 1].map(|c| median(v.iter().map(|x| x[c]).collect()));
+            (s, l)
+        })
+        .collect()
+}
+
+/// The θ prior region (actor frame): the box around every action's training targets, padded.
+pub fn theta_region(model: &ActionModel) -> ([f64; 2], [f64; 2]) {
+    let mut lo = [f64::INFINITY; 2];
+    let mut hi = [f64::NEG_INFINITY; 2];
+    for a in &model.actions {
+        for c in 0..2 {
+            lo[c] = lo[c].min(a.theta_min[c]);
+            hi[c] = hi[c].max(a.theta_max[c]);
+        }
+    }
+    let centre = [0, 1].map(|c| 0.5 * (lo[c] + hi[c]));
+    let half = [0, 1].map(|c| 0.5 * (hi[c] - lo[c]) + REGION_PAD);
+    (centre, half)
+}
+
+fn camera(name: &str, eye: [f64; 3], target: [f64; 3]) -> Result<Camera> {
+    let o = Vector3::from(SHOULDER);
+    let (r_cw, t_cw) = look_at(
+        Vector3::from(eye) + o,
+        Vector3::from(target) + o,
+        Vector3::z(),
+    )
+    .ok_or_else(|| Error::Config("camera: degenerate look-at".into()))?;
+    let (w, h) = (640u32, 480u32);
+    let f = f64::from(w) / 2.0 / (HFOV_DEG.to_radians() / 2.0).tan();
+    Ok(Camera {
+        name: name.into(),
+        width: w,
+        height: h,
+        fx: f,
+        fy: f,
+        cx: (f64::from(w) - 1.0) / 2.0,
+        cy: (f64::from(h) - 1.0) / 2.0,
+        distortion: [0.0; 5],
+        r_cw,
+        t_cw,
+    })
+}
+
+/// The scene of the experiment: `views` cameras (1 or 2), the table around the model's θ region,
+/// the right arm with the actor's arm lengths.
+pub fn scene_for(model: &ActionModel, views: usize, lengths: [f64; 2]) -> Result<Scene> {
+    let (c, h) = theta_region(model);
+    let mut cameras = vec![camera("camera0", CAMERA0.0, CAMERA0.1)?];
+    if views > 1 {
+        cameras.push(camera("camera1", CAMERA1.0, CAMERA1.1)?);
+    }
+    let o = Vector3::from(SHOULDER);
+    Ok(Scene {
+        cameras,
+        table: TableRegion {
+            placement: Placement {
+                origin: Vector3::new(o.x + c[0], o.y + c[1], o.z - TABLE_BELOW_SHOULDER),
+                yaw: 0.0,
+            },
+            half_extents: h,
+        },
+        actor: Placement {
+            origin: o,
+            yaw: 0.0,
+        },
+        side: Side::Right,
+        arm: ArmGeometry {
+            upper_arm_length: Some(lengths[0]),
+            lower_arm_length: Some(lengths[1]),
+            ..ArmGeometry::default()
+        },
+    })
+}
+
+/// One experimental condition.
+#[derive(Clone, Debug, Serialize)]
+pub struct Condition {
+    /// Short name (table row).
+    pub name: String,
+    /// Particles M.
+    pub particles: usize,
+    /// Raster or analytic contour.
+    #[serde(skip)]
+    pub contour: ContourMethod,
+    /// Number of camera views (1 or 2).
+    pub views: usize,
+    /// Clutter shapes in the background.
+    pub clutter: usize,
+    /// Sensor noise σ (grey levels).
+    pub noise: f64,
+    /// σ(N)/σ(0) of the cooling schedule (1 = no cooling).
+    pub sigma_end_ratio: f64,
+    /// Seed of the filter and of the rendered backgrounds.
+    pub seed: u64,
+}
+
+impl Condition {
+    /// The monocular baseline: 400 particles, raster contour, default clutter (40) and noise (3),
+    /// cooling 1/16.
+    pub fn monocular(name: &str) -> Self {
+        Self {
+            name: name.into(),
+            particles: 400,
+            contour: ContourMethod::Raster,
+            views: 1,
+            clutter: 40,
+            noise: 3.0,
+            sigma_end_ratio: 1.0 / 16.0,
+            seed: 9,
+        }
+    }
+
+    /// γ of Eq. 3 for this condition: 0.15·√V.
+    pub fn gamma(&self) -> f64 {
+        GAMMA * (self.views.max(1) as f64).sqrt()
+    }
+}
+
+/// A piece of a video: an action instance (or, with an empty action, a transition not
+/// evaluated), poses in the actor frame.
+#[derive(Clone, Debug)]
+pub struct Segment {
+    /// Action label ("" for a transition).
+    pub action: String,
+    /// θ (actor frame).
+    pub theta: [f64; 2],
+    /// Poses (actor frame).
+    pub poses: Vec<[f64; 9]>,
+}
+
+impl From<&TestTrial> for Segment {
+    fn from(t: &TestTrial) -> Self {
+        Self {
+            action: t.action.clone(),
+            theta: t.theta,
+            poses: t.poses.clone(),
+        }
+    }
+}
+
+/// Joins trials back to back with `blend` interpolated transition frames between them.
+pub fn back_to_back(trials: &[&TestTrial], blend: usize) -> Vec<Segment> {
+    let mut out: Vec<Segment> = Vec::new();
+    for t in trials {
+        if let (Some(prev), Some(first)) =
+            (out.last().and_then(|s| s.poses.last()), t.poses.first())
+            && blend > 0
+        {
+            let (a, b) = (*prev, *first);
+            let poses = (1..=blend)
+                .map(|i| {
+                    let s = i as f64 / (blend + 1) as f64;
+                    std::array::from_fn(|c| a[c] + s * (b[c] - a[c]))
+                })
+                .collect();
+            out.push(Segment {
+                action: String::new(),
+                theta: [f64::NAN; 2],
+                poses,
+            });
+        }
+        out.push(Segment::from(*t));
+    }
+    out
+}
+
+struct Obs<'a> {
+    scene: &'a Scene,
+    geometry: &'a RenderArm,
+    likelihood: &'a LikelihoodModel,
+    edges: &'a [EdgeImage],
+}
+
+impl ObservationModel for Obs<'_> {
+    fn correct(&self, pose: &mut [f64; 9]) {
+        correct_arm(self.geometry, pose, None);
+    }
+
+    fn log_likelihoods(&self, poses: &[[f64; 9]], out: &mut [f64]) {
+        let world: Vec<[f64; 9]> = poses.iter().map(|p| self.scene.pose_to_world(p)).collect();
+        if self
+            .likelihood
+            .log_likelihood_batch(self.edges, &world, out)
+            .is_err()
+        {
+            out.fill(f64::NAN);
+        }
+    }
+}
+
+/// The result of one tracked video.
+#[derive(Clone, Debug)]
+pub struct VideoRun {
+    /// The track (frames from 0).
+    pub track: Trajectory,
+    /// The truth.
+    pub truth: Trajectory,
+    /// Milliseconds per frame of edge image + filter step (rendering excluded).
+    pub step_ms: Vec<f64>,
+    /// Milliseconds per frame of the scene synthesis (all views).
+    pub render_ms: Vec<f64>,
+    /// Overlays of the requested frames (first camera): frame index and image.
+    pub overlays: Vec<(usize, RgbImage)>,
+    /// Fraction of truth joints (p, q, r, all views) that project inside the image.
+    pub in_view: f64,
+}
+
+fn config(model: &ActionModel, cond: &Condition) -> Result<TrackerConfig> {
+    let (centre, half) = theta_region(model);
+    TrackerConfig::builder(PfRegion::new(centre, half))
+        .particles(cond.particles)
+        .seed(cond.seed)
+        .sigma_end_ratio(cond.sigma_end_ratio)
+        .build()
+        .map_err(|e| Error::Config(format!("tracker: {e}")))
+}
+
+/// Renders `segments` in `scene` frame by frame and tracks them; `overlay_frames` are kept as
+/// overlay images (best pose's contour and θ̄).
+pub fn run_video(
+    model: &ActionModel,
+    scene: &Scene,
+    segments: &[Segment],
+    cond: &Condition,
+    overlay_frames: &[usize],
+) -> Result<VideoRun> {
+    let lengths = [
+        scene
+            .arm
+            .upper_arm_length
+            .unwrap_or(model.arm_lengths.upper_arm),
+        scene
+            .arm
+            .lower_arm_length
+            .unwrap_or(model.arm_lengths.forearm_hand),
+    ];
+    let mut synth = scene_synth(scene, lengths);
+    synth.clutter = cond.clutter;
+    synth.noise_sigma = cond.noise;
+    let geometry = render_arm(scene, lengths);
+    let cams: Vec<_> = scene.cameras.iter().map(render_camera).collect();
+    let likelihood =
+        LikelihoodModel::new(cams.clone(), geometry.clone(), cond.gamma(), cond.contour)
+            .map_err(|e| Error::Config(format!("observation model: {e}")))?;
+    let names: Vec<String> = model.actions.iter().map(|a| a.name.clone()).collect();
+    let mut tracker = Tracker::new(
+        model.actions.iter().map(|a| &a.phmm),
+        names.clone(),
+        config(model, cond)?,
+    )
+    .map_err(|e| Error::Model {
+        context: "building the tracker".into(),
+        message: e.to_string(),
+    })?;
+    let mut workspaces: Vec<EdgeWorkspace> = cams.iter().map(|_| EdgeWorkspace::new()).collect();
+    let mut track = Trajectory {
+        actions: names.clone(),
+        rows: Vec::new(),
+    };
+    let mut truth = Trajectory::default();
+    let (mut step_ms, mut render_ms, mut overlays) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut inside, mut total) = (0usize, 0usize);
+    let mut frame = 0usize;
+    for seg in segments {
+        for pose in &seg.poses {
+            let world = scene.pose_to_world(pose);
+            let t = frame as f64 / FPS;
+            truth
+                .rows
+                .push(TrajRow::truth(frame, t, &seg.action, seg.theta, world));
+            let t0 = Instant::now();
+            let mut images = Vec::with_capacity(cams.len());
+            for (v, cam) in cams.iter().enumerate() {
+                for j in 0..3 {
+                    total += 1;
+                    let x = Vector3::new(world[3 * j], world[3 * j + 1], world[3 * j + 2]);
+                    if let Some((u, w)) = scene.cameras[v].project(&x)
+                        && scene.cameras[v].in_image(u, w)
+                    {
+                        inside += 1;
+                    }
+                }
+                let img = synth
+                    .render(cam, &world, cond.seed.wrapping_add(v as u64))
+                    .map_err(|e| Error::Config(format!("synth: frame {frame}: {e}")))?;
+                images.push(
+                    RgbImage::from_raw(img.width, img.height, img.data).ok_or_else(|| {
+                        Error::Config(format!("synth: frame {frame}: bad image buffer"))
+                    })?,
+                );
+            }
+            render_ms.push(t0.elapsed().as_secs_f64() * 1e3);
+            let t1 = Instant::now();
+            let mut edges = Vec::with_capacity(images.len());
+            for (v, img) in images.iter().enumerate() {
+                let view = ImageView::rgb8(img.as_raw(), img.width(), img.height())
+                    .map_err(|e| Error::Config(format!("frame {frame}: {e}")))?;
+                let g = workspaces[v]
+                    .compute(view, &edge_params(img.width()))
+                    .map_err(|e| Error::Config(format!("frame {frame}: {e}")))?;
+                edges.push(g.clone());
+            }
+            let obs = Obs {
+                scene,
+                geometry: &geometry,
+                likelihood: &likelihood,
+                edges: &edges,
+            };
+            let estimate = tracker.step(&obs);
+            step_ms.push(t1.elapsed().as_secs_f64() * 1e3);
+            let r = FrameResult {
+                best_world: scene.pose_to_world(&estimate.best_pose),
+                smoothed_world: scene.pose_to_world(&estimate.smoothed_pose),
+                theta_world: scene.theta_to_world(estimate.theta_mean),
+                estimate,
+            };
+            track.rows.push(track_row(frame, t, &names, &r));
+            if overlay_frames.contains(&frame)
+                && let Some(mut img) = images.into_iter().next()
+            {
+                let contour = contour_points(&cams[0], &geometry, &r.best_world, cond.contour);
+                let dot = scene.cameras[0]
+                    .project(&r.theta_world)
+                    .map(|(u, v)| ([u, v], [1.0, 0.1, 0.1]));
+                draw_overlay(&mut img, &contour, dot);
+                overlays.push((frame, img));
+            }
+            frame += 1;
+        }
+    }
+    Ok(VideoRun {
+        track,
+        truth,
+        step_ms,
+        render_ms,
+        overlays,
+        in_view: inside as f64 / total.max(1) as f64,
+    })
+}
+
+/// The evaluated result of a condition.
+#[derive(Clone, Debug, Serialize)]
+pub struct ConditionResult {
+    /// The condition.
+    pub condition: Condition,
+    /// Videos tracked.
+    pub videos: usize,
+    /// SPEC §5.4 metrics over every video (instances of all videos).
+    pub report: EvalReport,
+    /// Action names (rows/columns of the confusion matrix).
+    pub actions: Vec<String>,
+    /// `confusion[true][predicted]`, counted over action instances.
+    pub confusion: Vec<Vec<usize>>,
+    /// Mean ms per frame of edge image + filter step (one thread per video).
+    pub ms_per_frame: f64,
+    /// Mean ms per frame of the scene synthesis.
+    pub render_ms_per_frame: f64,
+    /// Fraction of truth joints inside the image(s).
+    pub in_view: f64,
+    /// Wall-clock seconds of the condition.
+    pub wall_seconds: f64,
+}
+
+/// Merges runs into one track and one truth (frame indices offset, one frame gap between runs so
+/// instances never join).
+pub fn merge(runs: &[VideoRun]) -> (Trajectory, Trajectory) {
+    let mut track = Trajectory::default();
+    let mut truth = Trajectory::default();
+    let mut offset = 0usize;
+    for r in runs {
+        if track.actions.is_empty() {
+            track.actions.clone_from(&r.track.actions);
+        }
+        let n = r.truth.rows.len();
+        track.rows.extend(r.track.rows.iter().map(|x| {
+            let mut x = x.clone();
+            x.frame += offset;
+            x
+        }));
+        truth.rows.extend(r.truth.rows.iter().map(|x| {
+            let mut x = x.clone();
+            x.frame += offset;
+            x
+        }));
+        offset += n + 1;
+    }
+    (track, truth)
+}
+
+/// Evaluates runs of a condition.
+pub fn summarise(
+    cond: &Condition,
+    model: &ActionModel,
+    runs: &[VideoRun],
+    wall_seconds: f64,
+) -> Result<ConditionResult> {
+    let (track, truth) = merge(runs);
+    let report = evaluate(&track, &truth)?;
+    let actions: Vec<String> = model.actions.iter().map(|a| a.name.clone()).collect();
+    let mut confusion = vec![vec![0usize; actions.len()]; actions.len()];
+    for i in &report.instances {
+        if let (Some(t), Some(p)) = (
+            actions.iter().position(|a| *a == i.action),
+            actions.iter().position(|a| *a == i.predicted),
+        ) {
+            confusion[t][p] += 1;
+        }
+    }
+    let mean = |v: Vec<f64>| {
+        let n = v.len().max(1) as f64;
+        v.iter().sum::<f64>() / n
+    };
+    let frames: usize = runs.iter().map(|r| r.step_ms.len()).sum();
+    let in_view = runs
+        .iter()
+        .map(|r| r.in_view * r.step_ms.len() as f64)
+        .sum::<f64>()
+        / frames.max(1) as f64;
+    Ok(ConditionResult {
+        condition: cond.clone(),
+        videos: runs.len(),
+        report,
+        actions,
+        confusion,
+        ms_per_frame: mean(runs.iter().flat_map(|r| r.step_ms.clone()).collect()),
+        render_ms_per_frame: mean(runs.iter().flat_map(|r| r.render_ms.clone()).collect()),
+        in_view,
+        wall_seconds,
+    })
+}
+
+/// Tracks every trial of `trials` as its own video (in parallel over trials) and evaluates.
+pub fn run_condition(
+    model: &ActionModel,
+    trials: &[TestTrial],
+    cond: &Condition,
+) -> Result<(ConditionResult, Vec<VideoRun>)> {
+    let t0 = Instant::now();
+    let lengths = subject_lengths(trials);
+    let runs: Vec<VideoRun> = trials
+        .par_iter()
+        .map(|t| {
+            let l = lengths.get(&t.subject).copied().unwrap_or(t.lengths);
+            let scene = scene_for(model, cond.views, l)?;
+            run_video(model, &scene, &[Segment::from(t)], cond, &[])
+        })
+        .collect::<Result<_>>()?;
+    let res = summarise(cond, model, &runs, t0.elapsed().as_secs_f64())?;
+    Ok((res, runs))
+}
+
+/// Relabels a three-action model's test labels onto two actions (reach-forward and reach-across
+/// become `reach`).
+pub fn two_action_label(a: &str) -> String {
+    if a.starts_with("reach") {
+        "reach".into()
+    } else {
+        a.to_string()
+    }
+}
