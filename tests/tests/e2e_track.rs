@@ -2,6 +2,8 @@
 //! library: the built-in generator's demonstrations train one parametric HMM per action, a
 //! video of point, push and reach in a row is rendered with known truth and tracked.
 
+#![allow(clippy::unwrap_used)]
+
 use std::sync::atomic::AtomicBool;
 
 use actrack::demo::train_generator_model;
