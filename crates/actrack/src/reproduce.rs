@@ -27,7 +27,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::error::{Error, Result};
-use crate::eval::{EvalReport, evaluate};
+use crate::eval::{ErrorStats, EvalReport, evaluate};
 use crate::manifest::Manifest;
 use crate::mocap::ArmSide;
 use crate::mocap::trial::{Importer, median};
@@ -317,6 +317,8 @@ pub struct VideoRun {
     pub track: Trajectory,
     /// The truth.
     pub truth: Trajectory,
+    /// The track with the best particle's pose instead of the median-filtered one (diagnostic).
+    pub best: Trajectory,
     /// Milliseconds per frame of edge image + filter step (rendering excluded).
     pub step_ms: Vec<f64>,
     /// Milliseconds per frame of the scene synthesis (all views).
@@ -380,6 +382,7 @@ pub fn run_video(
         rows: Vec::new(),
     };
     let mut truth = Trajectory::default();
+    let mut best = track.clone();
     let (mut step_ms, mut render_ms, mut overlays) = (Vec::new(), Vec::new(), Vec::new());
     let (mut inside, mut total) = (0usize, 0usize);
     let mut frame = 0usize;
@@ -436,7 +439,11 @@ pub fn run_video(
                 theta_world: scene.theta_to_world(estimate.theta_mean),
                 estimate,
             };
-            track.rows.push(track_row(frame, t, &names, &r));
+            let row = track_row(frame, t, &names, &r);
+            let mut b = row.clone();
+            b.pose = r.best_world;
+            best.rows.push(b);
+            track.rows.push(row);
             if overlay_frames.contains(&frame)
                 && let Some(mut img) = images.into_iter().next()
             {
@@ -453,6 +460,7 @@ pub fn run_video(
     Ok(VideoRun {
         track,
         truth,
+        best,
         step_ms,
         render_ms,
         overlays,
@@ -469,6 +477,8 @@ pub struct ConditionResult {
     pub videos: usize,
     /// SPEC §5.4 metrics over every video (instances of all videos).
     pub report: EvalReport,
+    /// Joint errors of the unfiltered best particle (diagnostic: the median filter's lag).
+    pub best_particle: ErrorStats,
     /// Action names (rows/columns of the confusion matrix).
     pub actions: Vec<String>,
     /// `confusion[true][predicted]`, counted over action instances.
@@ -518,6 +528,15 @@ pub fn summarise(
 ) -> Result<ConditionResult> {
     let (track, truth) = merge(runs);
     let report = evaluate(&track, &truth)?;
+    let best_runs: Vec<VideoRun> = runs
+        .iter()
+        .map(|r| VideoRun {
+            track: r.best.clone(),
+            ..r.clone()
+        })
+        .collect();
+    let (best, _) = merge(&best_runs);
+    let best_particle = evaluate(&best, &truth)?.overall;
     let actions: Vec<String> = model.actions.iter().map(|a| a.name.clone()).collect();
     let mut confusion = vec![vec![0usize; actions.len()]; actions.len()];
     for i in &report.instances {
@@ -542,6 +561,7 @@ pub fn summarise(
         condition: cond.clone(),
         videos: runs.len(),
         report,
+        best_particle,
         actions,
         confusion,
         ms_per_frame: mean(runs.iter().flat_map(|r| r.step_ms.clone()).collect()),
