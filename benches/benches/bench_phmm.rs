@@ -45,8 +45,8 @@ fn fit(seqs: &[DMatrix<f64>], thetas: &[DVector<f64>]) -> Phmm {
         .max_iterations(ITERATIONS)
         .tolerance(0.0)
         .check()
-        .unwrap();
-    let (model, report) = params.fit(seqs, thetas).unwrap();
+        .expect("valid parameters");
+    let (model, report) = params.fit(seqs, thetas).expect("fit");
     assert_eq!(report.iterations, ITERATIONS);
     model
 }
@@ -59,12 +59,12 @@ fn bench_phmm(c: &mut Criterion) {
     let one = rayon::ThreadPoolBuilder::new()
         .num_threads(1)
         .build()
-        .unwrap();
+        .expect("one-thread pool");
     g.bench_function("one_thread", |b| {
-        b.iter(|| one.install(|| fit(black_box(&seqs), black_box(&thetas))))
+        b.iter(|| one.install(|| fit(black_box(&seqs), black_box(&thetas))));
     });
     g.bench_function("default_threads", |b| {
-        b.iter(|| fit(black_box(&seqs), black_box(&thetas)))
+        b.iter(|| fit(black_box(&seqs), black_box(&thetas)));
     });
     g.finish();
 
@@ -75,15 +75,15 @@ fn bench_phmm(c: &mut Criterion) {
         b.iter(|| {
             model
                 .log_likelihood(black_box(&seqs[0]), black_box(&th))
-                .unwrap()
-        })
+                .expect("log-likelihood")
+        });
     });
     g.bench_function("posteriors", |b| {
         b.iter(|| {
             model
                 .posteriors(black_box(&seqs[0]), black_box(&th))
-                .unwrap()
-        })
+                .expect("posteriors")
+        });
     });
     g.finish();
 }
