@@ -97,6 +97,29 @@ pub enum ResampleWhen {
     EssBelow(f64),
 }
 
+/// How the action dimension is treated when resampling (not in the SPEC; see the crate docs).
+///
+/// The literal CONDENSATION step ([`ActionBalance::Joint`]) resamples the whole set at once. At
+/// the start of an action (the rest pose) every action generates nearly the same pose, so the
+/// likelihood carries no action information, and resampling every frame lets genetic drift
+/// remove whole actions from the set before the movement starts to discriminate them; a lost
+/// action can only come back through the exit state. [`ActionBalance::Mixture`] resamples
+/// **within each action** instead (a mixture particle filter, Vermaak, Doucet & Pérez 2003):
+/// action a gets `n_a` particles, at least a floor, and the action posterior is carried in
+/// the post-resampling weights `w_i = P(a_i)/n_{a_i}`, so it is updated exactly by the
+/// likelihoods (`P(a | I_1:t) ∝ P(a | I_1:t−1) · mean likelihood of a's particles`) and never by
+/// resampling noise.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub enum ActionBalance {
+    /// Resample the joint set (SPEC §3.6 literally); weights are uniform afterwards.
+    Joint,
+    /// Resample within each action. The `f64` is the fraction ε ∈ (0, 1) of M split evenly
+    /// over the actions as a floor: every action that still has particles of non-zero weight
+    /// keeps at least ⌈ε·M/|𝒜|⌉ of them; the other (1 − ε)·M follow the action posterior.
+    /// Default `Mixture(0.25)`.
+    Mixture(f64),
+}
+
 /// How a particle turns its state into a pose (SPEC §3.4, erratum E14).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub enum PoseSampling {
@@ -110,6 +133,9 @@ pub enum PoseSampling {
     Mean,
 }
 
+/// Default floor fraction of [`ActionBalance::Mixture`].
+pub const DEFAULT_ACTION_FLOOR: f64 = 0.25;
+
 /// The validated configuration of a [`crate::Tracker`]. Build it with [`TrackerConfig::builder`].
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TrackerConfig {
@@ -122,6 +148,7 @@ pub struct TrackerConfig {
     pub(crate) k_init: KInit,
     pub(crate) resampling: Resampling,
     pub(crate) resample_when: ResampleWhen,
+    pub(crate) action_balance: ActionBalance,
     pub(crate) pose_sampling: PoseSampling,
     pub(crate) median_window: usize,
     pub(crate) seed: u64,
@@ -144,6 +171,7 @@ impl TrackerConfig {
                 k_init: KInit::First,
                 resampling: Resampling::Systematic,
                 resample_when: ResampleWhen::EveryFrame,
+                action_balance: ActionBalance::Mixture(DEFAULT_ACTION_FLOOR),
                 pose_sampling: PoseSampling::Gaussian { samples: 1 },
                 median_window: 5,
                 seed: 0,
@@ -193,6 +221,10 @@ impl TrackerConfig {
     /// When to resample.
     pub fn resample_when(&self) -> ResampleWhen {
         self.resample_when
+    }
+    /// How the action dimension is resampled.
+    pub fn action_balance(&self) -> ActionBalance {
+        self.action_balance
     }
     /// How poses are generated.
     pub fn pose_sampling(&self) -> PoseSampling {
@@ -281,6 +313,14 @@ impl TrackerConfigBuilder {
     pub fn ess_threshold(self) -> Self {
         self.resample_when(ResampleWhen::EssBelow(0.5))
     }
+    /// How the action dimension is resampled (default
+    /// [`ActionBalance::Mixture`]`(0.25)`; [`ActionBalance::Joint`] is the SPEC's literal
+    /// CONDENSATION step).
+    #[must_use]
+    pub fn action_balance(mut self, balance: ActionBalance) -> Self {
+        self.config.action_balance = balance;
+        self
+    }
     /// How poses are generated (default one Gaussian draw).
     #[must_use]
     pub fn pose_sampling(mut self, mode: PoseSampling) -> Self {
@@ -354,6 +394,13 @@ impl TrackerConfigBuilder {
                 "the ESS threshold is a fraction of M in (0, 1] (SPEC 0.5), got {f}"
             ));
         }
+        if let ActionBalance::Mixture(f) = c.action_balance
+            && !(f.is_finite() && f > 0.0 && f < 1.0)
+        {
+            return bad(format!(
+                "the per-action particle floor is a fraction of M in (0, 1) (default 0.25), got {f}"
+            ));
+        }
         if let PoseSampling::Gaussian { samples } = c.pose_sampling
             && samples == 0
         {
@@ -419,6 +466,7 @@ mod tests {
         assert_eq!(c.grammar(), &Grammar::Uniform);
         assert_eq!(c.resampling(), Resampling::Systematic);
         assert_eq!(c.resample_when(), ResampleWhen::EveryFrame);
+        assert_eq!(c.action_balance(), ActionBalance::Mixture(0.25));
         assert_eq!(c.samples_per_particle(), 1);
         assert_eq!(c.median_window(), 5);
         let c2 = c.to_builder().ess_threshold().build().unwrap();

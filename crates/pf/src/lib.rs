@@ -56,8 +56,8 @@ pub mod synthetic;
 mod tracker;
 
 pub use config::{
-    Boundary, Grammar, KInit, PoseSampling, ResampleWhen, Resampling, TableRegion, TrackerConfig,
-    TrackerConfigBuilder,
+    ActionBalance, Boundary, DEFAULT_ACTION_FLOOR, Grammar, KInit, PoseSampling, ResampleWhen,
+    Resampling, TableRegion, TrackerConfig, TrackerConfigBuilder,
 };
 pub use cooling::cooling_sigma;
 pub use error::PfError;

@@ -73,11 +73,25 @@ impl Resampler {
         rng: &mut R,
         out: &mut Vec<usize>,
     ) {
-        let m = weights.len();
         out.clear();
-        if m == 0 {
+        self.resample_n(weights, weights.len(), rng, out);
+    }
+
+    /// Append `m` ancestors drawn from `weights` (indices into `weights`, ascending) to `out`.
+    /// The expected number of copies of particle i is `m·w_i/Σw`. All-zero or non-finite total
+    /// weight spreads the `m` draws evenly over the particles (cyclically).
+    pub fn resample_n<R: Rng + ?Sized>(
+        &mut self,
+        weights: &[f64],
+        m: usize,
+        rng: &mut R,
+        out: &mut Vec<usize>,
+    ) {
+        let n_w = weights.len();
+        if m == 0 || n_w == 0 {
             return;
         }
+        let base = out.len();
         self.cumulative.clear();
         let mut acc = 0.0;
         for &w in weights {
@@ -86,7 +100,9 @@ impl Resampler {
         }
         let total = acc;
         if !(total.is_finite() && total > 0.0) {
-            out.extend(0..m);
+            let start = out.len();
+            out.extend((0..m).map(|n| n % n_w));
+            out[start..].sort_unstable();
             return;
         }
         match self.scheme {
@@ -107,7 +123,7 @@ impl Resampler {
                 let mf = m as f64;
                 let mut prev = 0.0;
                 let mut residual_total = 0.0;
-                for i in 0..m {
+                for i in 0..n_w {
                     let wi = (self.cumulative[i] - prev) / total;
                     prev = self.cumulative[i];
                     let copies = (mf * wi).floor();
@@ -116,25 +132,25 @@ impl Resampler {
                     // Reuse `cumulative` for the residuals' cumulative sum.
                     self.cumulative[i] = residual_total;
                 }
-                out.truncate(m);
-                let rest = m - out.len();
+                out.truncate(base + m);
+                let rest = base + m - out.len();
                 if rest > 0 {
                     if residual_total > 0.0 {
                         let start = out.len();
                         multinomial(&self.cumulative, residual_total, rest, rng, out);
                         // Both parts are ascending; merge them in place.
-                        out.sort_unstable();
+                        out[base..].sort_unstable();
                         debug_assert!(out.len() == start + rest);
                     } else {
                         // Rounding left no residual mass: pad with the heaviest particle.
                         let heaviest = argmax(weights);
-                        out.resize(m, heaviest);
-                        out.sort_unstable();
+                        out.resize(base + m, heaviest);
+                        out[base..].sort_unstable();
                     }
                 }
             }
         }
-        debug_assert_eq!(out.len(), m);
+        debug_assert_eq!(out.len(), base + m);
     }
 }
 
@@ -175,6 +191,44 @@ fn multinomial<R: Rng + ?Sized>(
         out.push(i);
     }
     out[start..].sort_unstable();
+}
+
+/// Particle counts per action for mixture resampling ([`crate::ActionBalance::Mixture`]).
+///
+/// `posterior[a]` is P(a) (a ∈ 𝒜, summing to 1; actions with P(a) = 0 have no particle left to
+/// resample from and get none). Every other action gets a floor of ⌈ε·M/|𝒜|⌉ particles (less if
+/// the floors alone would exceed M), and the remaining particles are shared in proportion to
+/// P(a), rounded by largest remainder (ties to the lower index), so the counts sum to M exactly.
+/// Deterministic: no random draws.
+pub fn allocate_actions(posterior: &[f64], m: usize, floor_fraction: f64, out: &mut Vec<usize>) {
+    out.clear();
+    out.resize(posterior.len(), 0);
+    let live = posterior.iter().filter(|&&p| p > 0.0).count();
+    if live == 0 || m == 0 {
+        return;
+    }
+    let n_actions = posterior.len() as f64;
+    // ⌈ε·M/|𝒜|⌉, capped so that the live actions' floors fit into M.
+    let floor = ((floor_fraction * m as f64 / n_actions).ceil() as usize).min(m / live);
+    let free = m - floor * live;
+    let total: f64 = posterior.iter().filter(|&&p| p > 0.0).sum();
+    let mut assigned = 0;
+    // (remainder, index) of every live action, for the largest-remainder rounding.
+    let mut rem: Vec<(f64, usize)> = Vec::with_capacity(live);
+    for (a, &p) in posterior.iter().enumerate() {
+        if p > 0.0 {
+            let share = free as f64 * p / total;
+            let whole = (share.floor() as usize).min(free - assigned);
+            out[a] = floor + whole;
+            assigned += whole;
+            rem.push((share - whole as f64, a));
+        }
+    }
+    rem.sort_by(|x, y| y.0.total_cmp(&x.0).then(x.1.cmp(&y.1)));
+    for &(_, a) in rem.iter().cycle().take(free - assigned) {
+        out[a] += 1;
+    }
+    debug_assert_eq!(out.iter().sum::<usize>(), m);
 }
 
 fn argmax(x: &[f64]) -> usize {

@@ -7,11 +7,13 @@ use rayon::prelude::*;
 use crate::config::check_grammar_matrix;
 use crate::estimate::{self, MedianFilter, Scratch, WeightedSet};
 use crate::model::{ActionCache, D, Next};
-use crate::resample::{Resampler, effective_sample_size, normalise_log_weights};
+use crate::resample::{
+    Resampler, allocate_actions, effective_sample_size, log_sum_exp, normalise_log_weights,
+};
 use crate::rng::{DOMAIN_PARTICLE, DOMAIN_RESAMPLE, stream};
 use crate::{
-    ActionState, Boundary, CloudParticle, Estimate, Grammar, KInit, ObservationModel, PfError,
-    PoseSampling, ResampleWhen, TrackerConfig,
+    ActionBalance, ActionState, Boundary, CloudParticle, Estimate, Grammar, KInit,
+    ObservationModel, PfError, PoseSampling, ResampleWhen, TrackerConfig,
 };
 
 /// Particles per rayon task: enough work per task to amortise scheduling.
@@ -105,6 +107,25 @@ impl Kernel<'_> {
     }
 }
 
+/// Buffers of the mixture resampler (reused every frame).
+#[derive(Debug, Clone, Default)]
+struct MixtureScratch {
+    /// log P(a) of every action.
+    log_mass: Vec<f64>,
+    /// P(a) of every action.
+    posterior: Vec<f64>,
+    /// Particles allocated to every action.
+    counts: Vec<usize>,
+    /// Global indices of the current action's particles.
+    members: Vec<usize>,
+    /// Their weights, normalised within the action.
+    member_w: Vec<f64>,
+    /// Their log weights (for the group LSE).
+    member_log_w: Vec<f64>,
+    /// Ancestors drawn within the action (indices into `members`).
+    draws: Vec<usize>,
+}
+
 /// Fold `x` into [−b, b] by reflection at the borders (any distance).
 #[inline]
 pub(crate) fn reflect(x: f64, b: f64) -> f64 {
@@ -161,6 +182,7 @@ pub struct Tracker {
     w: Vec<f64>,
     resampler: Resampler,
     ancestors: Vec<usize>,
+    mixture: MixtureScratch,
     scratch: Scratch,
     median: MedianFilter,
 }
@@ -230,6 +252,7 @@ impl Tracker {
             w: vec![1.0 / m as f64; m],
             resampler: Resampler::new(config.resampling),
             ancestors: Vec::with_capacity(m),
+            mixture: MixtureScratch::default(),
             scratch: Scratch::new(n_actions),
             median: MedianFilter::new(config.median_window),
             models,
@@ -377,14 +400,87 @@ impl Tracker {
             return;
         }
         let mut rng = stream(self.config.seed, DOMAIN_RESAMPLE, frame, 0);
-        self.resampler
-            .resample(&self.w, &mut rng, &mut self.ancestors);
+        match self.config.action_balance {
+            ActionBalance::Joint => {
+                self.resampler
+                    .resample(&self.w, &mut rng, &mut self.ancestors);
+                self.log_w.fill(-(m as f64).ln());
+                self.w.fill(1.0 / m as f64);
+            }
+            ActionBalance::Mixture(floor) => {
+                if !self.resample_mixture(floor, &mut rng) {
+                    self.resampler
+                        .resample(&self.w, &mut rng, &mut self.ancestors);
+                    self.log_w.fill(-(m as f64).ln());
+                    self.w.fill(1.0 / m as f64);
+                }
+            }
+        }
         for (dst, &a) in self.next_states.iter_mut().zip(&self.ancestors) {
             *dst = self.states[a];
         }
         std::mem::swap(&mut self.states, &mut self.next_states);
-        self.log_w.fill(-(m as f64).ln());
-        self.w.fill(1.0 / m as f64);
+    }
+
+    /// Mixture resampling ([`ActionBalance::Mixture`]): resample within each action, n_a
+    /// particles for action a (at least a floor), and carry P(a) in the new weights
+    /// `w_i = P(a_i)/n_{a_i}`. Fills `ancestors` (grouped by action, ascending within each)
+    /// and the new `log_w`/`w`. Returns false (changing nothing) if the weights have no finite
+    /// total, for the caller to fall back to joint resampling.
+    fn resample_mixture<R: Rng + ?Sized>(&mut self, floor: f64, rng: &mut R) -> bool {
+        let n_actions = self.models.len();
+        let mx = &mut self.mixture;
+        mx.log_mass.clear();
+        for a in 0..n_actions {
+            mx.member_log_w.clear();
+            mx.member_log_w.extend(
+                self.states
+                    .iter()
+                    .zip(&self.log_w)
+                    .filter(|(s, _)| s.action == a)
+                    .map(|(_, &lw)| lw),
+            );
+            mx.log_mass.push(log_sum_exp(&mx.member_log_w));
+        }
+        // log_w is normalised, but renormalise the masses against rounding.
+        let lse = log_sum_exp(&mx.log_mass);
+        if !lse.is_finite() {
+            return false;
+        }
+        mx.posterior.clear();
+        mx.posterior
+            .extend(mx.log_mass.iter().map(|&l| (l - lse).exp()));
+        allocate_actions(&mx.posterior, self.config.particles, floor, &mut mx.counts);
+        self.ancestors.clear();
+        self.log_w_new.clear();
+        for a in 0..n_actions {
+            let n_a = mx.counts[a];
+            if n_a == 0 {
+                continue;
+            }
+            mx.members.clear();
+            mx.member_w.clear();
+            for (i, (s, &lw)) in self.states.iter().zip(&self.log_w).enumerate() {
+                if s.action == a {
+                    mx.members.push(i);
+                    mx.member_w.push((lw - mx.log_mass[a]).exp());
+                }
+            }
+            mx.draws.clear();
+            self.resampler
+                .resample_n(&mx.member_w, n_a, rng, &mut mx.draws);
+            self.ancestors
+                .extend(mx.draws.iter().map(|&j| mx.members[j]));
+            let lw = mx.log_mass[a] - lse - (n_a as f64).ln();
+            self.log_w_new.extend(std::iter::repeat_n(lw, n_a));
+        }
+        debug_assert_eq!(self.ancestors.len(), self.config.particles);
+        std::mem::swap(&mut self.log_w, &mut self.log_w_new);
+        self.log_w_new.resize(self.config.particles, 0.0);
+        for (w, &lw) in self.w.iter_mut().zip(&self.log_w) {
+            *w = lw.exp();
+        }
+        true
     }
 
     /// The configuration.

@@ -4,6 +4,7 @@
 // Test helpers unwrap freely; exact float comparisons are intended where used.
 #![allow(clippy::unwrap_used, clippy::float_cmp)]
 
+use actrack_pf::ActionBalance;
 use actrack_pf::synthetic::{self, OracleObservation};
 use actrack_pf::{
     ConstantObservation, Estimate, Grammar, KInit, ObservationModel, PfError, PoseSampling,
@@ -161,8 +162,17 @@ impl ObservationModel for Blackout<'_> {
 fn degenerate_frames_do_not_corrupt_the_filter() {
     let (m, names) = models(3);
     let seq = truth(2, 8);
-    for when in [ResampleWhen::EveryFrame, ResampleWhen::EssBelow(0.5)] {
-        let c = config().resample_when(when).build().unwrap();
+    for (when, balance) in [
+        (ResampleWhen::EveryFrame, ActionBalance::Joint),
+        (ResampleWhen::EssBelow(0.5), ActionBalance::Joint),
+        (ResampleWhen::EveryFrame, ActionBalance::Mixture(0.25)),
+        (ResampleWhen::EssBelow(0.5), ActionBalance::Mixture(0.25)),
+    ] {
+        let c = config()
+            .resample_when(when)
+            .action_balance(balance)
+            .build()
+            .unwrap();
         let mut t = Tracker::new(&m, names.clone(), c).unwrap();
         let mut last = None;
         for (f, x) in seq.iter().enumerate() {
@@ -207,10 +217,16 @@ fn degenerate_frames_do_not_corrupt_the_filter() {
             );
             assert!(e.ess.is_finite() && e.theta_entropy.is_finite());
             if value.is_some() {
-                // Prior weights kept: uniform after resampling, else the previous weights.
+                // Prior weights kept: uniform after joint resampling, P(a)/n_a after mixture
+                // resampling (at most |𝒜| distinct values), else the previous weights.
                 let m = t.weights().len() as f64;
-                if will_resample {
+                if will_resample && balance == ActionBalance::Joint {
                     assert!(t.weights().iter().all(|w| (w - 1.0 / m).abs() < 1e-12));
+                } else if will_resample {
+                    let mut distinct: Vec<f64> = t.weights().to_vec();
+                    distinct.sort_by(f64::total_cmp);
+                    distinct.dedup();
+                    assert!(distinct.len() <= 3, "{distinct:?}");
                 } else {
                     for (a, b) in t.weights().iter().zip(&prior_w) {
                         assert!((a - b).abs() < 1e-12);
@@ -223,7 +239,7 @@ fn degenerate_frames_do_not_corrupt_the_filter() {
         let last = last.unwrap();
         assert!(
             last.action_posterior[2] > 0.9,
-            "{when:?}: {:?}",
+            "{when:?} {balance:?}: {:?}",
             last.action_posterior
         );
         assert!((last.theta_mean[0] - 0.1).hypot(last.theta_mean[1] - 0.5) < 0.03);
