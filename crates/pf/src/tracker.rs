@@ -765,6 +765,104 @@ mod tests {
         }
     }
 
+    /// Mixture resampling is unbiased: over many draws, the expected total weight carried by
+    /// the copies of particle i equals its weight w_i (so every weighted estimate is unbiased),
+    /// every action keeps at least its floor of particles, and P(a) is preserved exactly.
+    #[test]
+    fn mixture_resampling_is_unbiased() {
+        let (models, names) = synthetic::demo_models(3, 10).unwrap();
+        for scheme in [Resampling::Systematic, Resampling::Multinomial] {
+            let cfg = TrackerConfig::builder(synthetic::table_region())
+                .particles(60)
+                .resampling(scheme)
+                .action_balance(ActionBalance::Mixture(0.25))
+                .build()
+                .unwrap();
+            let mut t = Tracker::new(&models, names.clone(), cfg).unwrap();
+            let m = 60;
+            let mut rng = Pcg64Mcg::seed_from_u64(3);
+            // Uneven weights, action 2 almost dead (P ≈ 1e-4), one zero weight.
+            let mut raw = vec![0.0; m];
+            for i in 0..m {
+                let action = if i < 40 {
+                    0
+                } else if i < 55 {
+                    1
+                } else {
+                    2
+                };
+                t.states[i] = ActionState {
+                    action,
+                    theta: [0.0; 2],
+                    k: i,
+                };
+                let u: f64 = rng.random();
+                raw[i] = u * u * if action == 2 { 1e-4 } else { 1.0 };
+            }
+            raw[7] = 0.0;
+            let total: f64 = raw.iter().sum();
+            let w0: Vec<f64> = raw.iter().map(|v| v / total).collect();
+            let states0 = t.states.clone();
+            let mut p0 = [0.0; 3];
+            for (s, w) in states0.iter().zip(&w0) {
+                p0[s.action] += w;
+            }
+            let draws = 20_000;
+            let mut carried = vec![0.0; m];
+            for d in 0..draws {
+                t.states.clone_from(&states0);
+                t.w.clone_from(&w0);
+                for (lw, w) in t.log_w.iter_mut().zip(&w0) {
+                    *lw = w.ln();
+                }
+                let mut r = Pcg64Mcg::seed_from_u64(1000 + d);
+                assert!(t.resample_mixture(0.25, &mut r));
+                assert_eq!(t.ancestors.len(), m);
+                let mut count = [0_usize; 3];
+                let mut p = [0.0; 3];
+                for (&anc, &w) in t.ancestors.iter().zip(&t.w) {
+                    carried[anc] += w;
+                    count[states0[anc].action] += 1;
+                    p[states0[anc].action] += w;
+                }
+                // Floor ⌈0.25·60/3⌉ = 5 per action.
+                assert!(count.iter().all(|&c| c >= 5), "{count:?}");
+                for a in 0..3 {
+                    assert!((p[a] - p0[a]).abs() < 1e-12 * p0[a].max(1e-300) + 1e-15);
+                }
+                assert!((t.w.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+            }
+            for i in 0..m {
+                let mean = carried[i] / f64::from(u32::try_from(draws).unwrap());
+                // Within 5 standard errors (a copy carries at most P(a)/n_a ≤ 1/5).
+                let tol =
+                    5.0 * (w0[i] * 0.2 / f64::from(u32::try_from(draws).unwrap())).sqrt() + 1e-12;
+                assert!(
+                    (mean - w0[i]).abs() < tol,
+                    "{scheme:?} particle {i}: carried {mean}, weight {}",
+                    w0[i]
+                );
+                if w0[i] == 0.0 {
+                    assert!(carried[i] == 0.0);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn allocation_floor_and_sum() {
+        let mut out = Vec::new();
+        allocate_actions(&[0.98, 0.02, 0.0], 400, 0.25, &mut out);
+        // Floor ⌈0.25·400/3⌉ = 34 for the two live actions; the other 332 shared 0.98 : 0.02.
+        assert_eq!(out.iter().sum::<usize>(), 400);
+        assert_eq!(out[2], 0);
+        assert_eq!(out[1], 34 + 7);
+        allocate_actions(&[0.5, 0.5], 7, 0.9, &mut out);
+        assert_eq!(out, vec![4, 3]);
+        allocate_actions(&[1.0 / 3.0; 3], 1, 0.25, &mut out);
+        assert_eq!(out.iter().sum::<usize>(), 1);
+    }
+
     #[test]
     fn reflection_folds_into_the_band() {
         let b = 1.25;
