@@ -6,6 +6,7 @@
 //!
 //! Not implemented yet: see the project's issues.
 
+pub mod bench;
 pub mod demo;
 pub mod error;
 pub mod eval;

@@ -35,6 +35,8 @@ enum Command {
     Track(cmd::track::Args),
     /// Compare a track with ground truth (SPEC §5.4 metrics, plots).
     Eval(cmd::eval::Args),
+    /// Time the tracker on a synthetic sequence: per-frame median/p95, stages, peak memory.
+    Bench(cmd::bench::Args),
 }
 
 fn run(cli: Cli) -> anyhow::Result<ExitCode> {
@@ -46,6 +48,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Synth(a) => cmd::synth::run(&a),
         Command::Track(a) => cmd::track::run(&a),
         Command::Eval(a) => cmd::eval::run(&a),
+        Command::Bench(a) => cmd::bench::run(&a),
     }
 }
 
