@@ -23,10 +23,10 @@ fn subject(t: &LabelledTrial) -> u32 {
         .trial
         .source
         .file_name()
-        .unwrap()
+        .expect("trial path has a file name")
         .to_string_lossy()
         .into_owned();
-    name[3..6].parse().unwrap()
+    name[3..6].parse().expect("UE-ADL file names start with ADLnnn")
 }
 
 fn summarise(
