@@ -19,6 +19,7 @@ use actrack_render::{
     LikelihoodModel, correct_arm,
 };
 use nalgebra::{Rotation3, Vector3};
+use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::demo::train_generator_model;
@@ -309,7 +310,6 @@ pub fn prepare(opts: &BenchOptions, n_frames: usize) -> Result<Prepared> {
     poses.truncate(n_frames.max(1));
     let synth: SceneSynth = scene_synth(&scene, lengths);
     let cams: Vec<_> = scene.cameras.iter().map(render_camera).collect();
-    use rayon::prelude::*;
     let frames = poses
         .par_iter()
         .map(|p| {
@@ -574,6 +574,7 @@ mod tests {
     use super::*;
 
     #[test]
+    #[allow(clippy::float_cmp)] // exact order statistics of exact values
     fn percentiles() {
         let v: Vec<f64> = (1..=100).map(f64::from).collect();
         assert_eq!(percentile(&v, 0.5), 50.0);
