@@ -55,7 +55,8 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
 /// 2 when the error chain holds an input error of the library, else 1.
 fn exit_code_of(e: &anyhow::Error) -> u8 {
     let input = e.chain().any(|c| {
-        c.downcast_ref::<actrack::Error>().is_some_and(actrack::Error::is_input_error)
+        c.downcast_ref::<actrack::Error>()
+            .is_some_and(actrack::Error::is_input_error)
             || c.downcast_ref::<cmd::UsageError>().is_some()
     });
     if input { 2 } else { 1 }

@@ -43,7 +43,9 @@ pub fn frame_bar(len: Option<usize>) -> Option<indicatif::ProgressBar> {
     if !std::io::stderr().is_terminal() {
         return None;
     }
-    let bar = len.map_or_else(indicatif::ProgressBar::no_length, |n| indicatif::ProgressBar::new(n as u64));
+    let bar = len.map_or_else(indicatif::ProgressBar::no_length, |n| {
+        indicatif::ProgressBar::new(n as u64)
+    });
     let template = if len.is_some() {
         "{msg:>8} [{bar:40}] {pos}/{len} frames {per_sec} eta {eta}"
     } else {
