@@ -30,13 +30,28 @@ fn camera(w: u32, h: u32) -> Camera {
 fn scene() -> SceneSynth {
     SceneSynth::new(
         ArmGeometry::default(),
-        Some(Table { center: [0.0, 0.5, 0.75], half_extents: [0.8, 0.45], yaw: 0.0, thickness: 0.04 }),
+        Some(Table {
+            center: [0.0, 0.5, 0.75],
+            half_extents: [0.8, 0.45],
+            yaw: 0.0,
+            thickness: 0.04,
+        }),
         Some(Body::for_shoulder(SHOULDER, [0.0, 1.0], true)),
     )
 }
 
 fn true_pose() -> [f64; 9] {
-    let mut p = [SHOULDER[0], SHOULDER[1], SHOULDER[2], 0.3, 0.15, 0.95, 0.25, 0.55, 0.8];
+    let mut p = [
+        SHOULDER[0],
+        SHOULDER[1],
+        SHOULDER[2],
+        0.3,
+        0.15,
+        0.95,
+        0.25,
+        0.55,
+        0.8,
+    ];
     correct_arm(&ArmGeometry::default(), &mut p, None);
     p
 }
@@ -61,7 +76,9 @@ fn particles(n: usize) -> Vec<[f64; 9]> {
 fn bench_edges(c: &mut Criterion) {
     let mut group = c.benchmark_group("edge_image");
     for (w, h) in [(640u32, 480u32), (1920, 1080)] {
-        let frame = scene().render(&camera(w, h), &true_pose(), 1).expect("frame");
+        let frame = scene()
+            .render(&camera(w, h), &true_pose(), 1)
+            .expect("frame");
         let mut ws = EdgeWorkspace::new();
         let params = EdgeParams::default();
         group.bench_function(format!("{w}x{h}"), |b| {
@@ -78,7 +95,10 @@ fn bench_likelihood(c: &mut Criterion) {
     let cam = camera(640, 480);
     let frame = scene().render(&cam, &true_pose(), 1).expect("frame");
     let mut ws = EdgeWorkspace::new();
-    let edges = [ws.compute(frame.view(), &EdgeParams::default()).expect("edges").clone()];
+    let edges = [ws
+        .compute(frame.view(), &EdgeParams::default())
+        .expect("edges")
+        .clone()];
     let poses = particles(256);
     let mut group = c.benchmark_group("likelihood_per_particle_640x480");
     for method in [ContourMethod::Raster, ContourMethod::Analytic] {
@@ -88,7 +108,11 @@ fn bench_likelihood(c: &mut Criterion) {
         group.bench_function(format!("{method:?}"), |b| {
             b.iter(|| {
                 i = (i + 1) % poses.len();
-                black_box(model.log_likelihood(&edges, black_box(&poses[i])).expect("score"))
+                black_box(
+                    model
+                        .log_likelihood(&edges, black_box(&poses[i]))
+                        .expect("score"),
+                )
             });
         });
     }

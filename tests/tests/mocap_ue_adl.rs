@@ -26,7 +26,9 @@ fn subject(t: &LabelledTrial) -> u32 {
         .expect("trial path has a file name")
         .to_string_lossy()
         .into_owned();
-    name[3..6].parse().expect("UE-ADL file names start with ADLnnn")
+    name[3..6]
+        .parse()
+        .expect("UE-ADL file names start with ADLnnn")
 }
 
 fn summarise(
