@@ -56,12 +56,12 @@ fn run() -> actrack::eval::EvalReport {
 fn three_actions_tracked_end_to_end() {
     let r = run();
     assert!(
-        r.overall.rmse <= 0.08,
+        r.overall.rmse <= 0.075,
         "joint RMSE {:.2} cm",
         r.overall.rmse * 100.0
     );
     assert!(
-        r.table_error <= 0.10,
+        r.table_error <= 0.09,
         "table error {:.2} cm",
         r.table_error * 100.0
     );
@@ -69,9 +69,12 @@ fn three_actions_tracked_end_to_end() {
 }
 
 /// The issue's targets: joint RMSE ≤ 3 cm, table error ≤ 1.5 cm, every action recognised.
-/// Not met yet on this sequence (measured: RMSE 5.2 cm, table error 6.7 cm, 2 of 3 recognised):
-/// the action posterior locks onto one action early and θ along the camera's depth is weakly
-/// observed from one view. Run with `cargo test -p actrack-tests --test e2e_track -- --ignored`.
+/// Not met yet on this sequence. Measured with joint resampling: RMSE 5.2 cm, table error
+/// 6.7 cm, 2 of 3 recognised; with mixture resampling (the pf default since, which rules out
+/// resampling drift as the cause): RMSE 5.9 cm, table error 6.8 cm, 2 of 3 (push taken for
+/// point). The action posterior is now moved only by the likelihood, so the remaining
+/// confusion comes from the observation (θ along the camera's depth is weakly observed from
+/// one view). Run with `cargo test -p actrack-tests --test e2e_track -- --ignored`.
 #[test]
 #[ignore = "accuracy targets of issue 6 not reached yet (see the doc comment)"]
 fn three_actions_meet_issue_targets() {
