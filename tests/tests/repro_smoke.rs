@@ -4,6 +4,7 @@
 //! Checks that the metrics are finite and sane, not that they reach the paper's numbers.
 //! Skipped, with a message, when the data directory is absent.
 
+use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use actrack::manifest::{Manifest, TrainOptions};
@@ -21,13 +22,15 @@ fn manifest(files: &[(&str, &str)]) -> Manifest {
          heading = \"auto\"\ntheta = \"max-extension\"\n",
     );
     for (f, a) in files {
-        text.push_str(&format!(
+        writeln!(
+            text,
             "[[trials]]\nfiles = \"../shared/data/ue-adl/{f}\"\naction = \"{a}\"\narm = \"R\"\n\
-             static = \"{{dir}}/*_static.csv.xz\"\n"
-        ));
+             static = \"{{dir}}/*_static.csv.xz\""
+        )
+        .expect("writing to a String cannot fail");
     }
     let path = project_root().join("manifests").join("smoke.toml");
-    Manifest::parse(&path, &text).unwrap()
+    Manifest::parse(&path, &text).expect("smoke manifest parses")
 }
 
 #[test]
