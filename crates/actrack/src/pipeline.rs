@@ -89,6 +89,23 @@ pub struct SceneObservation<'a> {
     edges: &'a [EdgeImage],
 }
 
+impl<'a> SceneObservation<'a> {
+    /// The observation model of one frame: `edges` holds one edge image per camera of `scene`.
+    pub fn new(
+        scene: &'a Scene,
+        geometry: &'a RenderArm,
+        likelihood: &'a LikelihoodModel,
+        edges: &'a [EdgeImage],
+    ) -> Self {
+        Self {
+            scene,
+            geometry,
+            likelihood,
+            edges,
+        }
+    }
+}
+
 impl ObservationModel for SceneObservation<'_> {
     fn correct(&self, pose: &mut [f64; 9]) {
         correct_arm(self.geometry, pose, None);

@@ -16,11 +16,8 @@
 use std::collections::BTreeMap;
 use std::time::Instant;
 
-use actrack_pf::{ObservationModel, TableRegion as PfRegion, Tracker, TrackerConfig};
-use actrack_render::{
-    ArmGeometry as RenderArm, ContourMethod, EdgeImage, EdgeWorkspace, ImageView, LikelihoodModel,
-    contour_points, correct_arm,
-};
+use actrack_pf::{TableRegion as PfRegion, Tracker, TrackerConfig};
+use actrack_render::{ContourMethod, EdgeWorkspace, ImageView, LikelihoodModel, contour_points};
 use image::RgbImage;
 use nalgebra::Vector3;
 use rayon::prelude::*;
@@ -33,7 +30,8 @@ use crate::mocap::ArmSide;
 use crate::mocap::trial::{Importer, median};
 use crate::model::ActionModel;
 use crate::pipeline::{
-    FrameResult, GAMMA, draw_overlay, edge_params, render_arm, render_camera, track_row,
+    FrameResult, GAMMA, SceneObservation, draw_overlay, edge_params, render_arm, render_camera,
+    track_row,
 };
 use crate::scene::{ArmGeometry, Camera, Placement, Scene, Side, TableRegion, look_at};
 use crate::synth::scene_synth;
@@ -286,30 +284,6 @@ pub fn back_to_back(trials: &[&TestTrial], blend: usize) -> Vec<Segment> {
     out
 }
 
-struct Obs<'a> {
-    scene: &'a Scene,
-    geometry: &'a RenderArm,
-    likelihood: &'a LikelihoodModel,
-    edges: &'a [EdgeImage],
-}
-
-impl ObservationModel for Obs<'_> {
-    fn correct(&self, pose: &mut [f64; 9]) {
-        correct_arm(self.geometry, pose, None);
-    }
-
-    fn log_likelihoods(&self, poses: &[[f64; 9]], out: &mut [f64]) {
-        let world: Vec<[f64; 9]> = poses.iter().map(|p| self.scene.pose_to_world(p)).collect();
-        if self
-            .likelihood
-            .log_likelihood_batch(self.edges, &world, out)
-            .is_err()
-        {
-            out.fill(f64::NAN);
-        }
-    }
-}
-
 /// The result of one tracked video.
 #[derive(Clone, Debug)]
 pub struct VideoRun {
@@ -425,12 +399,7 @@ pub fn run_video(
                     .map_err(|e| Error::Config(format!("frame {frame}: {e}")))?;
                 edges.push(g.clone());
             }
-            let obs = Obs {
-                scene,
-                geometry: &geometry,
-                likelihood: &likelihood,
-                edges: &edges,
-            };
+            let obs = SceneObservation::new(scene, &geometry, &likelihood, &edges);
             let estimate = tracker.step(&obs);
             step_ms.push(t1.elapsed().as_secs_f64() * 1e3);
             let r = FrameResult {
