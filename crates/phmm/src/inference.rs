@@ -126,20 +126,30 @@ pub(crate) fn check_sequence(
     x: &DMatrix<f64>,
     index: usize,
 ) -> Result<(), PhmmError> {
-    check_sequence_shape(model.d, model.min_sequence_len(), model, x, index)
+    check_sequence_shape(
+        x,
+        index,
+        model.d,
+        model.min_sequence_len(),
+        model.n,
+        model.j,
+    )
 }
 
+/// Checks one observation sequence: non-empty, `d` columns (d > 0), finite, at least `min_len`
+/// frames (the shortest path to the last state of an `n_states` model with jumps ≤ `max_jump`).
 pub(crate) fn check_sequence_shape(
-    d: usize,
-    min_len: usize,
-    model: &Phmm,
     x: &DMatrix<f64>,
     index: usize,
+    d: usize,
+    min_len: usize,
+    n_states: usize,
+    max_jump: usize,
 ) -> Result<(), PhmmError> {
     if x.nrows() == 0 {
         return Err(PhmmError::EmptySequence { index });
     }
-    if x.ncols() != d {
+    if x.ncols() != d || d == 0 {
         return Err(PhmmError::ObservationDimension {
             index,
             expected: d,
@@ -152,8 +162,8 @@ pub(crate) fn check_sequence_shape(
             index,
             len: x.nrows(),
             min_len,
-            n_states: model.n,
-            max_jump: model.j,
+            n_states,
+            max_jump,
         });
     }
     Ok(())

@@ -10,7 +10,7 @@ use nalgebra::{DMatrix, DVector, SymmetricEigen};
 use rayon::prelude::*;
 
 use crate::PhmmError;
-use crate::inference::{Workspace, check_finite_seq, rows_into};
+use crate::inference::{Workspace, check_sequence_shape, rows_into};
 use crate::linalg::{cholesky_lower, cholesky_with_jitter, eigen_floor, symmetrise};
 use crate::model::{CovarianceKind, EndMode, Phmm};
 
@@ -320,26 +320,7 @@ impl ValidPhmmParams {
             None => 1,
         };
         for (index, x) in seqs.iter().enumerate() {
-            if x.nrows() == 0 {
-                return Err(PhmmError::EmptySequence { index });
-            }
-            if x.ncols() != d || d == 0 {
-                return Err(PhmmError::ObservationDimension {
-                    index,
-                    expected: d,
-                    got: x.ncols(),
-                });
-            }
-            check_finite_seq(x, index)?;
-            if x.nrows() < min_len {
-                return Err(PhmmError::SequenceTooShort {
-                    index,
-                    len: x.nrows(),
-                    min_len,
-                    n_states: n,
-                    max_jump: j,
-                });
-            }
+            check_sequence_shape(x, index, d, min_len, n, j)?;
         }
         for (index, t) in thetas.iter().enumerate() {
             if t.len() != p {
