@@ -58,6 +58,8 @@ mod camera;
 mod contour;
 mod edge;
 mod error;
+#[cfg(feature = "gpu")]
+pub mod gpu;
 mod image;
 mod likelihood;
 pub mod synth;
@@ -67,6 +69,8 @@ pub use camera::{Camera, NEAR_PLANE};
 pub use contour::{ContourMethod, Part2, RenderScratch, contour_points, project_parts};
 pub use edge::{EdgeImage, EdgeParams, EdgeWorkspace};
 pub use error::RenderError;
+#[cfg(feature = "gpu")]
+pub use gpu::{GpuError, GpuLikelihood};
 pub use image::{ImageRgb8, ImageView};
 pub use likelihood::{LikelihoodModel, SamplingMode};
 
