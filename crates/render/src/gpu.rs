@@ -632,6 +632,7 @@ pub struct GpuLikelihood {
     params: wgpu::Buffer,
     errors: Arc<Mutex<Vec<String>>>,
     adapter: String,
+    software: bool,
     max_buffer: u64,
     state: Mutex<State>,
 }
@@ -764,6 +765,7 @@ impl GpuLikelihood {
             params,
             errors,
             adapter: name,
+            software: info.device_type == wgpu::DeviceType::Cpu,
             max_buffer,
             state: Mutex::new(state),
         };
@@ -774,6 +776,12 @@ impl GpuLikelihood {
     /// The adapter in use: name, backend and device type (e.g. `llvmpipe (…) (Vulkan, Cpu)`).
     pub fn adapter_name(&self) -> &str {
         &self.adapter
+    }
+
+    /// Whether the adapter is a software rasteriser running on the CPU (Mesa lavapipe /
+    /// llvmpipe, WARP, SwiftShader): correct, but slower than [`LikelihoodModel`].
+    pub fn is_software(&self) -> bool {
+        self.software
     }
 
     /// The CPU model with the same cameras, geometry and γ (analytic contours).
@@ -1181,9 +1189,17 @@ mod tests {
         let e = [edges(&cam, 3)];
         let poses = random_poses(400, 11);
         compare(&g, &e, &poses);
+        let capacity =
+            |g: &GpuLikelihood| g.state.lock().unwrap().buffers.as_ref().unwrap().capacity;
+        let cap = capacity(&g);
         // Same batch again (buffers and edge image reused), then a smaller batch.
         compare(&g, &e, &poses);
         compare(&g, &e, &poses[..37]);
+        assert_eq!(
+            capacity(&g),
+            cap,
+            "buffers reallocated for a batch that did not grow"
+        );
     }
 
     #[test]
