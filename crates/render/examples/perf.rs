@@ -1,5 +1,13 @@
 //! Quick single-core timing of the observation model (minimum and median wall time per call).
-//! `cargo run --release -p actrack-render --example perf`.
+//!
+//! ```sh
+//! cargo run --release -p actrack-render --example perf                 # everything
+//! cargo run --release -p actrack-render --example perf -- edge640 3    # one kernel, 3 repetitions
+//! ```
+//!
+//! The first argument selects a kernel (`all`, `edge640`, `edge1080`, `raster`, `analytic`), the
+//! second scales the number of repetitions (default 1; use a small count under
+//! `valgrind --tool=callgrind`, whose instruction counts are stable under load).
 
 use std::time::Instant;
 
@@ -15,7 +23,7 @@ use rand_pcg::Pcg64Mcg;
 /// (minimum, median). On a loaded machine the minimum is the better estimate of the cost on an
 /// idle core.
 fn time<F: FnMut()>(reps: usize, inner: usize, mut f: F) -> (f64, f64) {
-    let mut wall: Vec<f64> = (0..reps)
+    let mut wall: Vec<f64> = (0..reps.max(1))
         .map(|_| {
             let t0 = Instant::now();
             for _ in 0..inner {
@@ -28,19 +36,24 @@ fn time<F: FnMut()>(reps: usize, inner: usize, mut f: F) -> (f64, f64) {
     (wall[0], wall[wall.len() / 2])
 }
 
+fn camera(w: u32, h: u32) -> Camera {
+    Camera::look_at(
+        Vector3::new(0.7, 1.9, 1.65),
+        Vector3::new(0.1, 0.25, 0.95),
+        Vector3::z(),
+        w,
+        h,
+        55f64.to_radians(),
+    )
+    .expect("camera")
+}
+
 fn main() {
+    let mut args = std::env::args().skip(1);
+    let which = args.next().unwrap_or_else(|| "all".to_owned());
+    let scale: Option<usize> = args.next().and_then(|s| s.parse().ok());
+    let reps = |default: usize| scale.unwrap_or(default);
     let shoulder = [0.2, 0.0, 1.2];
-    let cam = |w, h| {
-        Camera::look_at(
-            Vector3::new(0.7, 1.9, 1.65),
-            Vector3::new(0.1, 0.25, 0.95),
-            Vector3::z(),
-            w,
-            h,
-            55f64.to_radians(),
-        )
-        .expect("camera")
-    };
     let s = SceneSynth::new(
         ArmGeometry::default(),
         Some(Table {
@@ -54,11 +67,14 @@ fn main() {
     let g = ArmGeometry::default();
     let mut pose = [0.2, 0.0, 1.2, 0.3, 0.15, 0.95, 0.25, 0.55, 0.8];
     correct_arm(&g, &mut pose, None);
-    for (w, h) in [(640, 480), (1920, 1080)] {
-        let frame = s.render(&cam(w, h), &pose, 1).expect("frame");
+    for (name, w, h) in [("edge640", 640, 480), ("edge1080", 1920, 1080)] {
+        if which != "all" && which != name {
+            continue;
+        }
+        let frame = s.render(&camera(w, h), &pose, 1).expect("frame");
         let mut ws = EdgeWorkspace::new();
         let p = EdgeParams::default();
-        let (c, t) = time(41, 2, || {
+        let (c, t) = time(reps(41), 2, || {
             std::hint::black_box(ws.compute(frame.view(), &p).expect("edges").data()[0]);
         });
         println!(
@@ -66,17 +82,28 @@ fn main() {
             c / 1e6,
             t / 1e6
         );
-        let p0 = EdgeParams { sigma: 0.0, ..p };
-        let (c, t) = time(41, 2, || {
-            std::hint::black_box(ws.compute(frame.view(), &p0).expect("edges").data()[0]);
-        });
-        println!(
-            "  without smoothing: min {:.3} ms, median {:.3} ms",
-            c / 1e6,
-            t / 1e6
-        );
+        if which == "all" {
+            let p0 = EdgeParams { sigma: 0.0, ..p };
+            let (c, t) = time(41, 2, || {
+                std::hint::black_box(ws.compute(frame.view(), &p0).expect("edges").data()[0]);
+            });
+            println!(
+                "  without smoothing: min {:.3} ms, median {:.3} ms",
+                c / 1e6,
+                t / 1e6
+            );
+        }
     }
-    let c640 = cam(640, 480);
+    let c640 = camera(640, 480);
+    let methods: &[ContourMethod] = match which.as_str() {
+        "all" => &[ContourMethod::Raster, ContourMethod::Analytic],
+        "raster" => &[ContourMethod::Raster],
+        "analytic" => &[ContourMethod::Analytic],
+        _ => &[],
+    };
+    if methods.is_empty() {
+        return;
+    }
     let frame = s.render(&c640, &pose, 1).expect("frame");
     let edges = [EdgeWorkspace::new()
         .compute(frame.view(), &EdgeParams::default())
@@ -93,11 +120,11 @@ fn main() {
             p
         })
         .collect();
-    for method in [ContourMethod::Raster, ContourMethod::Analytic] {
+    for &method in methods {
         let n = actrack_render::contour_points(&c640, &g, &pose, method).len();
         let m = LikelihoodModel::new(vec![c640.clone()], g.clone(), 0.15, method).expect("model");
         let mut i = 0;
-        let (c, t) = time(101, 64, || {
+        let (c, t) = time(reps(101), 64, || {
             i = (i + 1) % poses.len();
             std::hint::black_box(m.log_likelihood(&edges, &poses[i]).expect("score"));
         });
