@@ -1288,8 +1288,8 @@ mod tests {
 
     #[test]
     fn gpu_close_and_large_parts() {
-        // A camera close to the arm: parts hundreds of pixels wide, partly outside the image,
-        // and some clipped by the near plane.
+        // A camera about 0.5 m from the arm: parts several times wider than in the other
+        // tests, many cut by the image border.
         let cam = camera([0.3, 0.6, 1.1], 320, 240, [0.0; 5]);
         let Some(g) = gpu(vec![cam.clone()]) else {
             return;
