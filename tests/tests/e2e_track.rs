@@ -28,6 +28,7 @@ fn run() -> actrack::eval::EvalReport {
         particles: 300,
         seed: 3,
         contour: ContourMethod::Raster,
+        ..TrackOptions::default()
     };
     let outputs = TrackOutputs {
         mcap: Some(dir.path().join("t.mcap")),

@@ -16,7 +16,7 @@
 use std::collections::BTreeMap;
 use std::time::Instant;
 
-use actrack_pf::{TableRegion as PfRegion, Tracker, TrackerConfig};
+use actrack_pf::{PoseSampling, TableRegion as PfRegion, Tracker, TrackerConfig};
 use actrack_render::{ContourMethod, EdgeWorkspace, ImageView, LikelihoodModel, contour_points};
 use image::RgbImage;
 use nalgebra::Vector3;
@@ -31,7 +31,7 @@ use crate::mocap::trial::{Importer, median};
 use crate::model::ActionModel;
 use crate::pipeline::{
     FrameResult, GAMMA, SceneObservation, draw_overlay, edge_params, render_arm, render_camera,
-    track_row,
+    track_row, training_theta_regions,
 };
 use crate::scene::{ArmGeometry, Camera, Placement, Scene, Side, TableRegion, look_at};
 use crate::synth::scene_synth;
@@ -210,6 +210,11 @@ pub struct Condition {
     pub noise: f64,
     /// σ(N)/σ(0) of the cooling schedule (1 = no cooling).
     pub sigma_end_ratio: f64,
+    /// How particles generate poses (SPEC: one Gaussian draw per particle and frame).
+    pub pose_sampling: PoseSampling,
+    /// Whether each action draws θ from the box of its own training targets (padded) instead
+    /// of the common region.
+    pub per_action_theta: bool,
     /// Seed of the filter and of the rendered backgrounds.
     pub seed: u64,
 }
@@ -226,6 +231,8 @@ impl Condition {
             clutter: 40,
             noise: 3.0,
             sigma_end_ratio: 1.0 / 16.0,
+            pose_sampling: PoseSampling::Gaussian { samples: 1 },
+            per_action_theta: false,
             seed: 9,
         }
     }
@@ -303,13 +310,18 @@ pub struct VideoRun {
     pub in_view: f64,
 }
 
-fn config(model: &ActionModel, cond: &Condition) -> Result<TrackerConfig> {
+/// The tracker configuration of a condition.
+pub fn tracker_config(model: &ActionModel, cond: &Condition) -> Result<TrackerConfig> {
     let (centre, half) = theta_region(model);
-    TrackerConfig::builder(PfRegion::new(centre, half))
+    let mut b = TrackerConfig::builder(PfRegion::new(centre, half))
         .particles(cond.particles)
         .seed(cond.seed)
         .sigma_end_ratio(cond.sigma_end_ratio)
-        .build()
+        .pose_sampling(cond.pose_sampling);
+    if cond.per_action_theta {
+        b = b.action_regions(training_theta_regions(model, REGION_PAD));
+    }
+    b.build()
         .map_err(|e| Error::Config(format!("tracker: {e}")))
 }
 
@@ -344,7 +356,7 @@ pub fn run_video(
     let mut tracker = Tracker::new(
         model.actions.iter().map(|a| &a.phmm),
         names.clone(),
-        config(model, cond)?,
+        tracker_config(model, cond)?,
     )
     .map_err(|e| Error::Model {
         context: "building the tracker".into(),

@@ -150,6 +150,7 @@ pub struct TrackerConfig {
     pub(crate) resample_when: ResampleWhen,
     pub(crate) action_balance: ActionBalance,
     pub(crate) pose_sampling: PoseSampling,
+    pub(crate) action_regions: Option<Vec<TableRegion>>,
     pub(crate) median_window: usize,
     pub(crate) seed: u64,
 }
@@ -173,6 +174,7 @@ impl TrackerConfig {
                 resample_when: ResampleWhen::EveryFrame,
                 action_balance: ActionBalance::Mixture(DEFAULT_ACTION_FLOOR),
                 pose_sampling: PoseSampling::Gaussian { samples: 1 },
+                action_regions: None,
                 median_window: 5,
                 seed: 0,
             },
@@ -236,6 +238,10 @@ impl TrackerConfig {
             PoseSampling::Gaussian { samples } => samples,
             PoseSampling::Mean => 1,
         }
+    }
+    /// Per-action θ supports (metres, actor frame), if set.
+    pub fn action_regions(&self) -> Option<&[TableRegion]> {
+        self.action_regions.as_deref()
     }
     /// Window of the causal median filter of the best pose, frames.
     pub fn median_window(&self) -> usize {
@@ -332,6 +338,17 @@ impl TrackerConfigBuilder {
     pub fn samples_per_particle(self, samples: usize) -> Self {
         self.pose_sampling(PoseSampling::Gaussian { samples })
     }
+    /// Per-action θ supports, one region per action in model order (metres, actor frame; not in
+    /// the SPEC). A particle of action a draws θ uniformly from its region at the start and on
+    /// re-entry, and θ is reflected at that region enlarged by the [`Boundary`] factor. Use the
+    /// box of each action's training targets (padded): a linear PHMM extrapolated far outside
+    /// the θ range it was trained on generates implausible poses. θ stays normalised by the
+    /// table region R (σ of the cooling schedule is in R's units). Default: every action uses R.
+    #[must_use]
+    pub fn action_regions(mut self, regions: Vec<TableRegion>) -> Self {
+        self.config.action_regions = Some(regions);
+        self
+    }
     /// Window of the causal median filter, frames (≥ 1; default 5; 1 disables smoothing).
     #[must_use]
     pub fn median_window(mut self, window: usize) -> Self {
@@ -409,6 +426,22 @@ impl TrackerConfigBuilder {
         if c.median_window == 0 {
             return bad("the median-filter window must be at least 1 frame (default 5)".into());
         }
+        if let Some(regions) = &c.action_regions {
+            if regions.is_empty() {
+                return bad("action regions: the list is empty (one region per action)".into());
+            }
+            for (a, t) in regions.iter().enumerate() {
+                if !(t.centre.iter().all(|v| v.is_finite())
+                    && t.half_extents.iter().all(|v| v.is_finite() && *v > 0.0))
+                {
+                    return bad(format!(
+                        "action region {a} needs a finite centre and positive half-extents \
+                         (metres), got centre {:?}, half-extents {:?}",
+                        t.centre, t.half_extents
+                    ));
+                }
+            }
+        }
         Ok(c)
     }
 }
@@ -483,6 +516,12 @@ mod tests {
         assert!(b().boundary(Boundary::Reflect(0.5)).build().is_err());
         assert!(b().samples_per_particle(0).build().is_err());
         assert!(b().median_window(0).build().is_err());
+        assert!(b().action_regions(vec![]).build().is_err());
+        assert!(
+            b().action_regions(vec![TableRegion::new([0.0, 0.4], [0.0, 0.1])])
+                .build()
+                .is_err()
+        );
         assert!(
             b().resample_when(ResampleWhen::EssBelow(1.5))
                 .build()

@@ -33,7 +33,16 @@ struct Kernel<'a> {
     models: &'a [ActionCache],
     grammar: &'a GrammarCache,
     config: &'a TrackerConfig,
+    /// Per-action θ supports in normalised units of R (centre, half-extents), if configured.
+    boxes: Option<&'a [ThetaBox]>,
     frame: u64,
+}
+
+/// A per-action θ support in normalised units of R.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct ThetaBox {
+    centre: [f64; 2],
+    half: [f64; 2],
 }
 
 impl Kernel<'_> {
@@ -45,10 +54,26 @@ impl Kernel<'_> {
         ]
     }
 
+    /// θ ~ U(R), or U(the action's support) when per-action regions are configured.
+    #[inline]
+    fn draw_theta<R: Rng + ?Sized>(&self, action: usize, rng: &mut R) -> [f64; 2] {
+        let u = Self::uniform_theta(rng);
+        match self.boxes {
+            None => u,
+            Some(b) => {
+                let b = &b[action];
+                [
+                    b.half[0].mul_add(u[0], b.centre[0]),
+                    b.half[1].mul_add(u[1], b.centre[1]),
+                ]
+            }
+        }
+    }
+
     /// SPEC §3.2: a ~ U(𝒜), θ ~ U(R), k ~ π_a (or uniform).
     fn init<R: Rng + ?Sized>(&self, rng: &mut R) -> ActionState {
         let action = rng.random_range(0..self.models.len());
-        let theta = Self::uniform_theta(rng);
+        let theta = self.draw_theta(action, rng);
         let m = &self.models[action];
         let k = match self.config.k_init {
             KInit::First => m.draw_start(rng),
@@ -73,16 +98,23 @@ impl Kernel<'_> {
                     }
                 };
                 s.k = self.models[s.action].draw_start(rng);
-                s.theta = Self::uniform_theta(rng);
+                s.theta = self.draw_theta(s.action, rng);
             }
         }
         let c = self.config;
         let sigma = self.models[s.action].sigma(s.k);
-        for t in &mut s.theta {
+        let support = self.boxes.map(|b| b[s.action]);
+        for (i, t) in s.theta.iter_mut().enumerate() {
             let e: f64 = rng.sample(rand_distr::StandardNormal);
             *t = sigma.mul_add(e, *t);
             if let Boundary::Reflect(b) = c.boundary {
-                *t = reflect(*t, b);
+                *t = match support {
+                    None => reflect(*t, b),
+                    Some(sb) => {
+                        let (m, h) = (sb.centre[i], sb.half[i]);
+                        h.mul_add(reflect((*t - m) / h, b), m)
+                    }
+                };
             }
         }
     }
@@ -170,6 +202,8 @@ pub struct Tracker {
     next_states: Vec<ActionState>,
     /// Generated, corrected poses: S per particle, particle-major.
     samples: Vec<[f64; D]>,
+    /// Per-action θ supports (normalised units of R), if configured.
+    boxes: Option<Vec<ThetaBox>>,
     /// Raw log-likelihoods of every sample.
     sample_ll: Vec<f64>,
     /// Index (within the particle's S samples) of its best-scoring sample: its x̃.
@@ -228,6 +262,31 @@ impl Tracker {
                 GrammarCache::Matrix(cum)
             }
         };
+        let boxes = match &config.action_regions {
+            None => None,
+            Some(regions) => {
+                if regions.len() != n_actions {
+                    return Err(PfError::InvalidConfig(format!(
+                        "{} action regions for {n_actions} actions (one per action, in model \
+                         order)",
+                        regions.len()
+                    )));
+                }
+                let t = &config.table;
+                Some(
+                    regions
+                        .iter()
+                        .map(|r| ThetaBox {
+                            centre: t.to_normalised(r.centre),
+                            half: [
+                                r.half_extents[0] / t.half_extents[0],
+                                r.half_extents[1] / t.half_extents[1],
+                            ],
+                        })
+                        .collect(),
+                )
+            }
+        };
         let m = config.particles;
         let s = config.samples_per_particle();
         let init_state = ActionState {
@@ -244,6 +303,7 @@ impl Tracker {
             states: vec![init_state; m],
             next_states: vec![init_state; m],
             samples: vec![[0.0; D]; m * s],
+            boxes,
             sample_ll: vec![0.0; m * s],
             best_sample: vec![0; m],
             ll: vec![0.0; m],
@@ -291,6 +351,7 @@ impl Tracker {
             models: &self.models,
             grammar: &self.grammar,
             config: &self.config,
+            boxes: self.boxes.as_deref(),
             frame,
         };
         let first = self.frame == 0;
@@ -368,6 +429,7 @@ impl Tracker {
                 }
             }
         }
+
         let est = {
             let set = WeightedSet {
                 states: &self.states,
@@ -562,7 +624,7 @@ mod tests {
     use super::*;
 
     use crate::synthetic::{self, SHAPES};
-    use crate::{Resampling, TrackerConfig};
+    use crate::{Resampling, TableRegion, TrackerConfig};
     use rand::SeedableRng;
     use rand_pcg::Pcg64Mcg;
 
@@ -646,6 +708,7 @@ mod tests {
                 models: &models,
                 grammar: &grammar,
                 config: &cfg,
+                boxes: None,
                 frame: 1,
             };
             let mut counts = [0_usize; 3];
@@ -694,6 +757,7 @@ mod tests {
             models: &models,
             grammar: &grammar,
             config: &cfg,
+            boxes: None,
             frame: 1,
         };
         let mut rng = Pcg64Mcg::seed_from_u64(11);
@@ -861,6 +925,78 @@ mod tests {
         assert_eq!(out, vec![4, 3]);
         allocate_actions(&[1.0 / 3.0; 3], 1, 0.25, &mut out);
         assert_eq!(out.iter().sum::<usize>(), 1);
+    }
+
+    /// Per-action θ supports: θ is drawn inside the action's own box at the start and on
+    /// re-entry and stays within the box enlarged by the reflection factor; a region count that
+    /// does not match the models is an error.
+    #[test]
+    fn per_action_regions_bound_theta() {
+        let n = 5;
+        let models = caches(0.3, n);
+        let regions = vec![
+            TableRegion::new([-0.30, 0.50], [0.05, 0.04]),
+            TableRegion::new([0.00, 0.45], [0.40, 0.15]),
+            TableRegion::new([0.10, 0.40], [0.02, 0.10]),
+        ];
+        let cfg = config(Grammar::Uniform, Boundary::Reflect(1.25))
+            .to_builder()
+            .action_regions(regions.clone())
+            .build()
+            .unwrap();
+        let table = *cfg.table();
+        let boxes: Vec<ThetaBox> = regions
+            .iter()
+            .map(|r| ThetaBox {
+                centre: table.to_normalised(r.centre),
+                half: [
+                    r.half_extents[0] / table.half_extents[0],
+                    r.half_extents[1] / table.half_extents[1],
+                ],
+            })
+            .collect();
+        let grammar = GrammarCache::Uniform;
+        let kernel = Kernel {
+            models: &models,
+            grammar: &grammar,
+            config: &cfg,
+            boxes: Some(&boxes),
+            frame: 1,
+        };
+        let inside = |a: usize, theta: [f64; 2], scale: f64| {
+            let m = table.to_metres(theta);
+            let r = &regions[a];
+            (0..2).all(|c| (m[c] - r.centre[c]).abs() <= scale * r.half_extents[c] + 1e-12)
+        };
+        let mut rng = Pcg64Mcg::seed_from_u64(5);
+        let mut seen = [0_usize; 3];
+        for _ in 0..2000 {
+            let mut s = kernel.init(&mut rng);
+            assert!(
+                inside(s.action, s.theta, 1.0),
+                "init outside its box: {s:?}"
+            );
+            for _ in 0..30 {
+                kernel.propagate(&mut s, &mut rng);
+                assert!(inside(s.action, s.theta, 1.25), "θ left its band: {s:?}");
+            }
+            seen[s.action] += 1;
+        }
+        assert!(seen.iter().all(|&c| c > 400), "actions switch: {seen:?}");
+        let wrong = cfg
+            .to_builder()
+            .action_regions(regions[..2].to_vec())
+            .build()
+            .unwrap();
+        let phmms: Vec<_> = SHAPES
+            .iter()
+            .map(|(_, shape)| synthetic::action_model(shape, n, 0.3, 0.015).unwrap())
+            .collect();
+        let names = SHAPES.iter().map(|(name, _)| (*name).to_string()).collect();
+        assert!(matches!(
+            Tracker::new(phmms.iter(), names, wrong),
+            Err(PfError::InvalidConfig(_))
+        ));
     }
 
     #[test]

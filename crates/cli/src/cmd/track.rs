@@ -6,7 +6,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use actrack::frames::{FrameOptions, FrameSource};
 use actrack::model::ActionModel;
-use actrack::pipeline::{ContourMethod, TrackOptions, TrackOutputs, track};
+use actrack::pipeline::{ContourMethod, ThetaPrior, TrackOptions, TrackOutputs, track};
 use actrack::scene::Scene;
 
 /// Set by Ctrl-C / SIGTERM; the pipeline finishes the outputs with the frames done so far.
@@ -68,6 +68,19 @@ pub struct Args {
     /// Contour of the likelihood: `raster` (SPEC §4.2) or `analytic` (cheaper).
     #[arg(long, value_enum, default_value_t = ContourArg::Raster)]
     pub contour: ContourArg,
+    /// θ prior of each action: `training` (the box of the action's training targets, padded by
+    /// 5 cm) or `scene` (the scene's table region for every action, SPEC §3.2 literally).
+    #[arg(long, value_enum, default_value_t = ThetaPriorArg::Training)]
+    pub theta_prior: ThetaPriorArg,
+}
+
+/// `--theta-prior`.
+#[derive(Debug, Clone, Copy, clap::ValueEnum)]
+pub enum ThetaPriorArg {
+    /// Each action's own training targets.
+    Training,
+    /// The scene's table region.
+    Scene,
 }
 
 /// `--contour`.
@@ -109,6 +122,10 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
         contour: match args.contour {
             ContourArg::Raster => ContourMethod::Raster,
             ContourArg::Analytic => ContourMethod::Analytic,
+        },
+        theta_prior: match args.theta_prior {
+            ThetaPriorArg::Training => ThetaPrior::Training,
+            ThetaPriorArg::Scene => ThetaPrior::Scene,
         },
     };
     let outputs = TrackOutputs {
