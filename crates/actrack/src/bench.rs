@@ -37,7 +37,8 @@ pub enum Device {
     Cpu,
     /// The GPU through wgpu (feature `gpu`); an error when there is no adapter.
     Gpu,
-    /// The GPU when an adapter exists, else the CPU (with a note in the report).
+    /// The GPU when a hardware adapter exists, else the CPU (with a note in the report; a
+    /// software adapter such as lavapipe is slower than the CPU path).
     Auto,
 }
 
@@ -344,6 +345,15 @@ pub fn make_scorer(
                 likelihood.geometry().clone(),
                 likelihood.gamma(),
             ) {
+                // A software adapter (lavapipe) is slower than the CPU likelihood.
+                Ok(g) if device == Device::Auto && g.is_software() => Ok((
+                    Scorer::Cpu(likelihood),
+                    "cpu",
+                    Some(format!(
+                        "only a software GPU ({}); using the CPU",
+                        g.adapter_name()
+                    )),
+                )),
                 Ok(g) => Ok((Scorer::Gpu(Box::new(g)), "gpu", None)),
                 Err(e) if device == Device::Auto => Ok((
                     Scorer::Cpu(likelihood),
