@@ -17,6 +17,7 @@
 //! max_gap = 10         # frames interpolated
 //! trim = { speed = 0.05, margin = 0 }   # m/s, or `false`
 //! heading = "auto"     # or { degrees = 180 }
+//! frame = "actor"      # or "lab" (the capture's coordinates, for comparison only)
 //! theta = "max-extension"              # or "last-frame"
 //!
 //! [[trials]]
@@ -123,6 +124,9 @@ pub struct ManifestTrial {
     pub theta_rule: Option<ThetaRule>,
     /// Line of the `[[trials]]` entry in the manifest.
     pub line: usize,
+    /// The manifest that lists the trial (`None` for a trial given directly): errors about the
+    /// entry itself, such as a missing `static`, name it and [`ManifestTrial::line`].
+    pub manifest: Option<PathBuf>,
 }
 
 /// A parsed manifest.
@@ -199,6 +203,7 @@ impl Manifest {
                         theta: e.theta,
                         theta_rule: e.theta_rule,
                         line,
+                        manifest: Some(path.to_path_buf()),
                     });
                 }
             }

@@ -153,8 +153,9 @@ impl ActionModel {
         match header.format.as_deref() {
             Some(FORMAT) => {}
             Some(other) => {
-                return Err(Error::invalid(
+                return Err(Error::parse(
                     path,
+                    key_line(text, "format"),
                     format!("not an actrack model file (format `{other}`, expected `{FORMAT}`)"),
                 ));
             }
@@ -168,8 +169,9 @@ impl ActionModel {
         match header.version {
             Some(serde_json::Value::Number(n)) if n.as_u64() == Some(u64::from(VERSION)) => {}
             Some(v) => {
-                return Err(Error::invalid(
+                return Err(Error::parse(
                     path,
+                    key_line(text, "version"),
                     format!(
                         "model file version {v} is not supported (this build of actrack reads \
                          version {VERSION}); retrain the model or use a matching actrack"
@@ -212,6 +214,14 @@ impl ActionModel {
     pub fn save(&self, path: &Path) -> Result<()> {
         crate::mocap::write_atomic(path, self.to_json()?.as_bytes())
     }
+}
+
+/// 1-based line of the first `"key"` in JSON text (1 when absent): where a header field is.
+fn key_line(text: &str, key: &str) -> usize {
+    let needle = format!("\"{key}\"");
+    text.find(&needle).map_or(1, |at| {
+        1 + text[..at].bytes().filter(|&b| b == b'\n').count()
+    })
 }
 
 /// Current UTC time as ISO 8601 (`2026-11-22T03:04:05Z`), from the system clock.

@@ -66,13 +66,15 @@ pub fn import_trials(
     trials
         .par_iter()
         .map(|t| {
-            let trial = importer.load(
-                &t.file,
-                t.static_path.as_deref(),
-                t.arm,
-                t.theta,
-                t.theta_rule,
-            )?;
+            let trial = importer
+                .load(
+                    &t.file,
+                    t.static_path.as_deref(),
+                    t.arm,
+                    t.theta,
+                    t.theta_rule,
+                )
+                .map_err(|e| entry_error(t, e))?;
             let k = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
             progress(Progress::Imported { done: k, total });
             Ok(LabelledTrial {
@@ -81,6 +83,27 @@ pub fn import_trials(
             })
         })
         .collect()
+}
+
+/// A marker trial listed without `static` is the manifest entry's fault: name the manifest and
+/// the entry's line rather than only the trial.
+fn entry_error(t: &ManifestTrial, e: Error) -> Error {
+    match (&e, &t.manifest, &t.static_path) {
+        (Error::Invalid { path, message }, Some(manifest), None)
+            if path == &t.file && message == crate::mocap::trial::NEEDS_STATIC =>
+        {
+            Error::parse(
+                manifest,
+                t.line.max(1),
+                format!(
+                    "{} is a marker trial and needs its subject's static trial: add \
+                     `static = \"…\"` to this [[trials]] entry",
+                    t.file.display()
+                ),
+            )
+        }
+        _ => e,
+    }
 }
 
 /// Fits one parametric HMM per action (in order of first appearance) to labelled trials.

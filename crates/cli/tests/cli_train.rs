@@ -254,3 +254,189 @@ fn bad_input_exits_2_and_writes_nothing() {
         .collect();
     assert!(stray.is_empty());
 }
+
+/// A Vicon Nexus "Trajectories" CSV with the UE-ADL right-arm markers (and the left shoulder
+/// cluster for the heading): every marker at a fixed offset from a body that slides along x,
+/// the fingertip reaching forward. `landmarks`: add the static-only anatomical landmarks.
+fn vicon_csv(frames: usize, landmarks: bool, reach: [f64; 2]) -> String {
+    let mut markers: Vec<(String, [f64; 3])> = Vec::new();
+    let cluster = |name: &str, c: [f64; 3], out: &mut Vec<(String, [f64; 3])>| {
+        for (k, d) in [
+            [30.0, 0.0, 0.0],
+            [0.0, 30.0, 0.0],
+            [0.0, 0.0, 30.0],
+            [20.0, 20.0, 5.0],
+        ]
+        .iter()
+        .enumerate()
+        {
+            out.push((
+                format!("{name}{}", k + 1),
+                [c[0] + d[0], c[1] + d[1], c[2] + d[2]],
+            ));
+        }
+    };
+    cluster("RSHO", [200.0, 0.0, 330.0], &mut markers);
+    cluster("RUAR", [220.0, 0.0, 180.0], &mut markers);
+    cluster("RLAR", [230.0, 150.0, 60.0], &mut markers);
+    markers.push(("RFTP".into(), [240.0, 400.0, 20.0]));
+    cluster("LSHO", [-200.0, 0.0, 330.0], &mut markers);
+    if landmarks {
+        for (n, p) in [
+            ("RGTH", [200.0, 0.0, 320.0]),
+            ("RLEP", [240.0, 0.0, 40.0]),
+            ("RMEP", [200.0, 0.0, 40.0]),
+            ("RSPR", [240.0, 250.0, 40.0]),
+            ("RSPU", [220.0, 250.0, 40.0]),
+        ] {
+            markers.push((n.into(), p));
+        }
+    }
+    let mut s = String::from("\u{feff}Trajectories\n100\n,,");
+    for (n, _) in &markers {
+        let _ = write!(s, "S:{n},,,");
+    }
+    s.push_str("\nFrame,Sub Frame");
+    for _ in &markers {
+        s.push_str(",X,Y,Z");
+    }
+    s.push_str("\n,");
+    for _ in &markers {
+        s.push_str(",mm,mm,mm");
+    }
+    s.push('\n');
+    for t in 0..frames {
+        let x = t as f64;
+        let _ = write!(s, "{},0", t + 1);
+        for (n, p) in &markers {
+            let [rx, ry] = if n == "RFTP" {
+                [reach[0] * x, reach[1] * x]
+            } else {
+                [0.0, 0.0]
+            };
+            let _ = write!(s, ",{:.3},{:.3},{:.3}", p[0] + x + rx, p[1] + ry, p[2]);
+        }
+        s.push('\n');
+    }
+    s
+}
+
+#[test]
+fn bad_vicon_input_names_file_and_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("S_static.csv"), vicon_csv(20, true, [0.0, 0.0])).unwrap();
+    let good = vicon_csv(60, false, [0.0, 4.0]);
+    // Three well-formed trials with different θ (a PHMM needs at least three).
+    for (k, r) in [[0.0, 4.0], [-2.0, 3.0], [1.5, 3.5]].iter().enumerate() {
+        std::fs::write(d.join(format!("good{k}.csv")), vicon_csv(60, false, *r)).unwrap();
+    }
+    let manifest = |file: &str, with_static: bool| {
+        format!(
+            "[options]\nstates = 3\niterations = 3\n[preprocessing]\ntrim = false\n\n[[trials]]\nfiles = [\"{file}\", \"good?.csv\"]\naction = \"reach\"\narm = \"R\"\n{}",
+            if with_static {
+                "static = \"S_static.csv\"\n"
+            } else {
+                ""
+            }
+        )
+    };
+    let run = |name: &str, text: &str, with_static: bool| -> String {
+        std::fs::write(d.join(format!("{name}.csv")), text).unwrap();
+        std::fs::write(
+            d.join(format!("{name}.toml")),
+            manifest(&format!("{name}.csv"), with_static),
+        )
+        .unwrap();
+        let o = cli(
+            d,
+            &[
+                "train",
+                "--manifest",
+                &format!("{name}.toml"),
+                "-o",
+                "out.actrack.json",
+            ],
+        );
+        assert!(
+            !d.join("out.actrack.json").exists(),
+            "{name}: model written"
+        );
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(2), "{name}: {e}");
+        e
+    };
+    // The well-formed trial trains (so the failures below are the mutations').
+    std::fs::write(d.join("good.toml"), manifest("good0.csv", true)).unwrap();
+    let o = cli(
+        d,
+        &[
+            "train",
+            "--manifest",
+            "good.toml",
+            "-o",
+            "good.actrack.json",
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let lines: Vec<&str> = good.lines().collect();
+    let edit = |f: &dyn Fn(&mut Vec<String>)| {
+        let mut v: Vec<String> = lines.iter().map(|s| (*s).to_string()).collect();
+        f(&mut v);
+        v.join("\n") + "\n"
+    };
+    // Ragged row (line 21 loses fields).
+    let e = run(
+        "ragged",
+        &edit(&|v| {
+            let keep: Vec<&str> = v[20].split(',').take(10).collect();
+            v[20] = keep.join(",");
+        }),
+        true,
+    );
+    assert!(e.contains("ragged.csv:21") && e.contains("fields"), "{e}");
+    // Text in a numeric field (line 31).
+    let e = run(
+        "text",
+        &edit(&|v| v[30] = v[30].replacen(",0,", ",0,abc", 1)),
+        true,
+    );
+    assert!(e.contains("text.csv:31") && e.contains("abc"), "{e}");
+    // Missing header line (the `Frame,Sub Frame,X,Y,Z` line).
+    let e = run("noheader", &edit(&|v| drop(v.remove(3))), true);
+    assert!(
+        e.contains("noheader.csv:4") && e.contains("Frame,Sub Frame"),
+        "{e}"
+    );
+    // Unknown marker name: RFTP renamed, so the marker set's fingertip is not in the file.
+    let e = run(
+        "unknown",
+        &edit(&|v| v[2] = v[2].replace("S:RFTP", "S:RFTX")),
+        true,
+    );
+    assert!(e.contains("unknown.csv:3") && e.contains("RFTP"), "{e}");
+    // A cluster with fewer than three markers in 20 interior frames (longer than max_gap).
+    let e = run(
+        "cluster",
+        &edit(&|v| {
+            for row in v.iter_mut().take(45).skip(25) {
+                let mut f: Vec<String> = row.split(',').map(str::to_string).collect();
+                // RUAR2..RUAR4 are markers 6..8 (0-based 5..7): fields 2 + 3k.
+                for k in 5..8 {
+                    for c in 0..3 {
+                        f[2 + 3 * k + c].clear();
+                    }
+                }
+                *row = f.join(",");
+            }
+        }),
+        true,
+    );
+    assert!(
+        e.contains("cluster.csv:26") && e.contains("frame 21") && e.contains("RUAR"),
+        "{e}"
+    );
+    // A marker trial listed without a static trial: the manifest entry is named.
+    let e = run("nostatic", &good, false);
+    assert!(e.contains("nostatic.toml:8") && e.contains("static"), "{e}");
+}

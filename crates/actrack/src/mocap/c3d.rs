@@ -105,6 +105,7 @@ pub fn parse_c3d(path: &Path, bytes: &[u8], wanted: Option<&[String]>) -> Result
         path: path.to_path_buf(),
         rate,
         first_frame: i64::from(points.first_frame),
+        first_line: None,
         names: keep.iter().map(|&k| names[k].clone()).collect(),
         positions,
     })

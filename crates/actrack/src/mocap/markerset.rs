@@ -329,14 +329,15 @@ impl Calibration {
         };
         let last = (0..n).rev().find(|&t| ok(t)).unwrap_or(first);
         if let Some(bad) = (first..=last).find(|&t| !ok(t)) {
-            return Err(Error::invalid(
-                &data.path,
-                format!(
-                    "frame {}: {} (gap too long to interpolate; raise max_gap or trim the trial)",
-                    data.first_frame + bad as i64,
-                    failure[bad].clone().unwrap_or_default()
-                ),
-            ));
+            let message = format!(
+                "frame {}: {} (gap too long to interpolate; raise max_gap or trim the trial)",
+                data.first_frame + bad as i64,
+                failure[bad].clone().unwrap_or_default()
+            );
+            return Err(match data.first_line {
+                Some(line) => Error::parse(&data.path, line + bad, message),
+                None => Error::invalid(&data.path, message),
+            });
         }
         let take = |j: usize| out[j][first..=last].to_vec();
         let last_joint = self.joints.len() - 1;
@@ -457,6 +458,7 @@ mod tests {
             path: "s.csv".into(),
             rate: 100.0,
             first_frame: 1,
+            first_line: None,
             names,
             positions: pos,
         }

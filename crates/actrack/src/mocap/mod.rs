@@ -48,6 +48,9 @@ pub struct MarkerData {
     pub rate: f64,
     /// Frame number of the first row (as in the file).
     pub first_frame: i64,
+    /// 1-based line of the first data row in a text file (Vicon CSV; rows follow line by
+    /// line), `None` for binary files (C3D). Messages about a frame name this line.
+    pub first_line: Option<usize>,
     /// Marker names without any `Subject:` prefix.
     pub names: Vec<String>,
     /// `positions[marker][frame]`, metres; NaN where the marker was not seen.
@@ -306,6 +309,7 @@ mod tests {
             path: "x".into(),
             rate: 100.0,
             first_frame: 10,
+            first_line: None,
             names: vec!["A".into()],
             positions: vec![vec![
                 nan,

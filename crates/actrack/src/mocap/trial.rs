@@ -24,6 +24,19 @@ pub enum ThetaRule {
     LastFrame,
 }
 
+/// The coordinates trials are expressed in.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum CoordinateFrame {
+    /// The actor frame of DESIGN.md (origin at the static trial's acting shoulder, table axes):
+    /// what action models should be trained in.
+    #[default]
+    Actor,
+    /// The capture's lab frame as recorded (a left arm is still mirrored, x → −x). For
+    /// comparison only: subjects sit in different places, so models generalise worse.
+    Lab,
+}
+
 /// Trimming of the rest phases at onset and offset by fingertip speed.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -60,6 +73,8 @@ pub struct Preprocessing {
     pub trim: Option<TrimOptions>,
     /// Heading of the actor frame.
     pub heading: Heading,
+    /// Actor frame (default) or lab frame.
+    pub frame: CoordinateFrame,
     /// θ rule for trials without an explicit θ.
     pub theta: ThetaRule,
     /// The marker set (default: UE-ADL).
@@ -73,6 +88,7 @@ impl Default for Preprocessing {
             frame_rate: Some(30.0),
             trim: Some(TrimOptions::default()),
             heading: Heading::Auto,
+            frame: CoordinateFrame::Actor,
             theta: ThetaRule::MaxExtension,
             marker_set: MarkerSet::ue_adl(),
         }
@@ -105,6 +121,10 @@ impl Preprocessing {
         self.marker_set.check()
     }
 }
+
+/// The message of the error for a marker trial loaded without a static trial.
+pub(crate) const NEEDS_STATIC: &str =
+    "a marker trial needs its subject's static trial (none given)";
 
 /// One prepared trial.
 #[derive(Clone, Debug)]
@@ -211,21 +231,24 @@ impl Importer {
                 return self.finish(path, side, arm, theta, Vec::new(), frame);
             }
         };
-        let static_path = static_path.ok_or_else(|| {
-            Error::invalid(
-                path,
-                "a marker trial needs its subject's static trial (none given)",
-            )
-        })?;
+        let static_path =
+            static_path.ok_or_else(|| Error::invalid(path, NEEDS_STATIC.to_string()))?;
         let cal = self.calibration(static_path, side)?;
         let gaps = data.fill_gaps(self.options.max_gap);
         let lab = cal.reconstruct(&data)?;
-        let frame = ActorFrame::new(
-            cal.static_shoulder(),
-            side,
-            self.options.heading,
-            cal.right_direction,
-        );
+        let frame = match self.options.frame {
+            CoordinateFrame::Actor => ActorFrame::new(
+                cal.static_shoulder(),
+                side,
+                self.options.heading,
+                cal.right_direction,
+            ),
+            CoordinateFrame::Lab => ActorFrame {
+                origin: [0.0; 3],
+                heading_deg: 0.0,
+                mirror: side == ArmSide::Left,
+            },
+        };
         let arm = frame.apply(&lab);
         let theta = theta.unwrap_or_else(|| theta_by_rule(&arm, rule));
         self.finish(path, side, arm, theta, gaps, frame)

@@ -176,6 +176,7 @@ pub fn parse_vicon_csv(path: &Path, text: &str, wanted: Option<&[String]>) -> Re
 
     let mut positions: Vec<Vec<[f64; 3]>> = vec![Vec::new(); keep.len()];
     let mut first_frame = None;
+    let mut first_line = None;
     let mut prev_frame: Option<i64> = None;
     let mut row = vec![[f64::NAN; 3]; keep.len()];
     for (ln, line) in lines {
@@ -203,6 +204,7 @@ pub fn parse_vicon_csv(path: &Path, text: &str, wanted: Option<&[String]>) -> Re
         }
         prev_frame = Some(frame);
         first_frame.get_or_insert(frame);
+        first_line.get_or_insert(ln);
         let mut count = 1;
         let mut c = 1;
         while let Some(f) = fields.next() {
@@ -240,6 +242,7 @@ pub fn parse_vicon_csv(path: &Path, text: &str, wanted: Option<&[String]>) -> Re
         path: path.to_path_buf(),
         rate,
         first_frame,
+        first_line,
         names: kept_names,
         positions,
     })

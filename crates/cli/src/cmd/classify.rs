@@ -80,6 +80,7 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
                 theta: None,
                 theta_rule: None,
                 line: 0,
+                manifest: None,
             }],
             false,
         ),
