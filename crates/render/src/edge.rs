@@ -144,6 +144,9 @@ pub struct EdgeWorkspace {
 
 /// Largest value of a slice (0 for an empty slice or all values ≤ 0); 8 lanes so that it
 /// vectorises.
+// Inlined into the dispatched `compute_kernels` (see there).
+#[allow(clippy::inline_always)]
+#[inline(always)]
 fn max_value(data: &[f32]) -> f32 {
     let mut lanes = [0f32; 8];
     let mut chunks = data.chunks_exact(8);
@@ -182,16 +185,34 @@ impl EdgeWorkspace {
     ) -> Result<&EdgeImage, RenderError> {
         frame.validate()?;
         params.validate()?;
+        // The kernels are compiled a second time with AVX2 (+ FMA, BMI, …) and the variant the
+        // CPU supports is chosen at run time (pulp; no `target-cpu` flag, so the binaries run on
+        // any x86-64). Every helper below is `#[inline(always)]` so that it is compiled inside
+        // the dispatched function. No FMA contraction happens (Rust never fuses `a * b + c`), so
+        // both variants give bit-identical G.
+        pulp::Arch::new().dispatch(Kernels {
+            ws: self,
+            frame: &frame,
+            params,
+        });
+        Ok(&self.out)
+    }
+
+    /// The body of [`EdgeWorkspace::compute`] on validated input.
+    // Must be inlined into the dispatched function to get its target features.
+    #[allow(clippy::inline_always)]
+    #[inline(always)]
+    fn compute_kernels(&mut self, frame: &ImageView<'_>, params: &EdgeParams) {
         let (w32, h32) = frame.size();
         let (w, h) = (w32 as usize, h32 as usize);
         let n = w * h;
-        let max_g = self.sobel(&frame, w, h);
+        let max_g = self.sobel(frame, w, h);
         self.out.width = w32;
         self.out.height = h32;
         self.out.data.resize(n, 0.0);
         if max_g <= 0.0 || !max_g.is_finite() {
             self.out.data.fill(0.0);
-            return Ok(&self.out);
+            return;
         }
         let thr = Threshold {
             inv: 1.0 / max_g,
@@ -215,7 +236,6 @@ impl EdgeWorkspace {
         } else {
             self.out.data.fill(0.0);
         }
-        Ok(&self.out)
     }
 
     /// The last result.
@@ -231,6 +251,9 @@ impl EdgeWorkspace {
     /// by max(g) that follows.
     // `hypot` does not vectorise; |g| ≤ 255·2, so the plain form cannot overflow.
     #[allow(clippy::imprecise_flops)]
+    // Inlined into the dispatched `compute_kernels` (see there).
+    #[allow(clippy::inline_always)]
+    #[inline(always)]
     fn sobel(&mut self, frame: &ImageView<'_>, w: usize, h: usize) -> f32 {
         self.mag.resize(w * h, 0.0);
         self.sv.resize(w, 0.0);
@@ -289,6 +312,9 @@ impl EdgeWorkspace {
         max_value(&lanes)
     }
 
+    // Inlined into the dispatched `compute_kernels` (see there).
+    #[allow(clippy::inline_always)]
+    #[inline(always)]
     fn make_kernel(&mut self, sigma: f32) {
         if self.kernel_sigma.to_bits() == sigma.to_bits() && !self.kernel.is_empty() {
             return;
@@ -309,6 +335,9 @@ impl EdgeWorkspace {
     /// Threshold + separable Gaussian `mag → out`, borders clamped; returns max(out). The
     /// horizontal pass writes into a ring of 2r+1 rows that the vertical pass reads, so the
     /// intermediate image never leaves the cache.
+    // Inlined into the dispatched `compute_kernels` (see there).
+    #[allow(clippy::inline_always)]
+    #[inline(always)]
     fn gauss(&mut self, w: usize, h: usize, thr: Threshold) -> f32 {
         let k = &self.kernel[..];
         let r = k.len() - 1;
@@ -354,6 +383,25 @@ impl EdgeWorkspace {
     }
 }
 
+/// [`EdgeWorkspace::compute_kernels`] as a [`pulp::WithSimd`] operation (a closure's
+/// `call_once` shim is not inlined into the dispatched function, this is).
+struct Kernels<'w, 'f, 'p> {
+    ws: &'w mut EdgeWorkspace,
+    frame: &'f ImageView<'f>,
+    params: &'p EdgeParams,
+}
+
+impl pulp::WithSimd for Kernels<'_, '_, '_> {
+    type Output = ();
+
+    // Inlined into the dispatched function (see `compute`).
+    #[allow(clippy::inline_always)]
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) {
+        self.ws.compute_kernels(self.frame, self.params);
+    }
+}
+
 /// Normalisation by max(g) and the threshold τ of SPEC §4.1 steps 3–4.
 #[derive(Clone, Copy)]
 struct Threshold {
@@ -363,7 +411,8 @@ struct Threshold {
 }
 
 impl Threshold {
-    #[inline]
+    #[allow(clippy::inline_always)]
+    #[inline(always)]
     fn apply(self, g: f32) -> f32 {
         let v = g * self.inv;
         if v > self.tau {
@@ -379,6 +428,9 @@ impl Threshold {
 /// One grey row (0.299 R + 0.587 G + 0.114 B for colour frames). Colour rows are first widened
 /// to f32 channel by channel into `chan` (contiguous, so it vectorises), then combined with a
 /// stride-3 read: about twice as fast as converting pixel by pixel.
+// Inlined into the dispatched `compute_kernels` (see there).
+#[allow(clippy::inline_always)]
+#[inline(always)]
 fn grey_row(frame: &ImageView<'_>, y: usize, chan: &mut Vec<f32>, dst: &mut [f32]) {
     let w = dst.len();
     match *frame {
@@ -409,6 +461,9 @@ fn grey_row(frame: &ImageView<'_>, y: usize, chan: &mut Vec<f32>, dst: &mut [f32
 /// columns keep their accumulators in registers across all taps; the symmetric kernel folds
 /// each pair of taps into one multiplication. The last block is aligned with the end of the
 /// row (it may overlap the previous one and recompute a few identical values).
+// Inlined into the dispatched `compute_kernels` (see there).
+#[allow(clippy::inline_always)]
+#[inline(always)]
 fn gauss_row(pad: &[f32], k: &[f32], dst: &mut [f32]) {
     let r = k.len() - 1;
     let w = dst.len();
@@ -449,6 +504,9 @@ fn gauss_row(pad: &[f32], k: &[f32], dst: &mut [f32]) {
 /// Whole rows at a time, two pairs of taps per sweep: every sweep streams four source rows
 /// sequentially (friendlier to the prefetcher than 2r+1 interleaved streams) and the output row
 /// stays in L1.
+// Inlined into the dispatched `compute_kernels` (see there).
+#[allow(clippy::inline_always)]
+#[inline(always)]
 fn gauss_col(src: &[f32], rows: &[usize], k: &[f32], dst: &mut [f32]) {
     let r = k.len() - 1;
     let w = dst.len();
@@ -598,6 +656,39 @@ mod tests {
                     .fold(0.0, f64::max);
                 assert!(err < 1e-4, "{w}×{h} {params:?}: {err}");
                 assert!((max_value(g.data()) - 1.0).abs() < 1e-6);
+            }
+        }
+    }
+
+    /// The variant chosen at run time (AVX2 on most x86-64 machines) gives the same G, bit for
+    /// bit, as the baseline (SSE2) build of the same kernels.
+    #[test]
+    fn dispatched_equals_baseline() {
+        use pulp::Simd;
+        for &(w, h) in &[(45usize, 37usize), (67, 9), (2, 3)] {
+            let rgb = test_frame(w, h);
+            let frame = ImageView::rgb8(&rgb, w as u32, h as u32).unwrap();
+            for params in [
+                EdgeParams::default(),
+                EdgeParams {
+                    tau: 0.35,
+                    sigma: 1.5,
+                    binary: true,
+                },
+                EdgeParams {
+                    sigma: 0.0,
+                    ..EdgeParams::default()
+                },
+            ] {
+                let mut ws = EdgeWorkspace::new();
+                let fast = ws.compute(frame, &params).unwrap().clone();
+                let mut base = EdgeWorkspace::new();
+                pulp::Scalar::new().vectorize(Kernels {
+                    ws: &mut base,
+                    frame: &frame,
+                    params: &params,
+                });
+                assert_eq!(fast, base.out, "{w}×{h} {params:?}");
             }
         }
     }
