@@ -7,7 +7,8 @@
 //!
 //! The first argument selects a kernel (`all`, `edge640`, `edge1080`, `raster`, `analytic`), the
 //! second scales the number of repetitions (default 1; use a small count under
-//! `valgrind --tool=callgrind`, whose instruction counts are stable under load).
+//! `valgrind --tool=callgrind`, whose instruction counts are stable under load). The first line
+//! says whether the edge-image kernels run with AVX2 on this CPU (runtime dispatch).
 
 use std::time::Instant;
 
@@ -49,6 +50,14 @@ fn camera(w: u32, h: u32) -> Camera {
 }
 
 fn main() {
+    // Whether the dispatched kernels (edge image) run with a wider instruction set than the
+    // baseline build on this CPU (x86-64: AVX2 = pulp's V3).
+    let simd = if matches!(pulp::Arch::new(), pulp::Arch::Scalar) {
+        "baseline"
+    } else {
+        "wide (x86-64: AVX2)"
+    };
+    println!("SIMD dispatch: {simd}");
     let mut args = std::env::args().skip(1);
     let which = args.next().unwrap_or_else(|| "all".to_owned());
     let scale: Option<usize> = args.next().and_then(|s| s.parse().ok());
