@@ -221,7 +221,7 @@ pub struct Condition {
 
 impl Condition {
     /// The monocular baseline: 400 particles, raster contour, default clutter (40) and noise (3),
-    /// cooling 1/16.
+    /// cooling 1/16, each action's θ prior its own training targets.
     pub fn monocular(name: &str) -> Self {
         Self {
             name: name.into(),
@@ -232,7 +232,7 @@ impl Condition {
             noise: 3.0,
             sigma_end_ratio: 1.0 / 16.0,
             pose_sampling: PoseSampling::Gaussian { samples: 1 },
-            per_action_theta: false,
+            per_action_theta: true,
             seed: 9,
         }
     }
