@@ -243,24 +243,53 @@ pub struct Classification {
     pub theta: [f64; 2],
 }
 
+/// Standard deviation (metres) of the isotropic noise added to every state's covariance when a
+/// partial sequence is scored ([`Classifier::classify`] with `partial`), the default of
+/// [`Classifier::new`].
+///
+/// Why: without its end the alignment of a prefix is free, and on a held-out subject the
+/// tight late states (σ_min = 1 mm) fit the subject's own posture so badly that a path parking
+/// the last, nearly arrived frames in one broad mid-movement state wins by ~100 nats, with a θ
+/// extrapolated 5–10 cm too far (ADL008 reach-across). The inflation bounds that mismatch.
+/// Chosen on training subjects only (model trained on ADL001–005, validated on ADL006–007,
+/// first 75 % of the movement: reach θ median / p90 5.6 / 14.4 and 3.6 / 25.5 cm without,
+/// 3.2 / 5.8 and 3.8 / 4.6 cm with 1 cm; 0.5 and 2 cm gave similar figures).
+pub const PARTIAL_COV_INFLATION: f64 = 0.01;
+
 /// Recognises the action of whole or partial sequences with a model.
 #[derive(Debug)]
 pub struct Classifier<'a> {
     model: &'a ActionModel,
-    /// Models without exit modelling, for sequences cut before their end.
+    /// Models without exit modelling and with inflated covariances, for sequences cut before
+    /// their end.
     truncated: Vec<Phmm>,
     /// Also start θ-EM from every distinct training θ of whole sequences (slower).
     pub multi_start: bool,
+    /// Partial sequences: θ by the MAP variant with each action's training θ distribution as
+    /// the prior (`true`, the default) or by maximum likelihood.
+    pub partial_prior: bool,
 }
 
 impl<'a> Classifier<'a> {
-    /// A classifier for `model`.
+    /// A classifier for `model`; partial sequences are scored with
+    /// [`PARTIAL_COV_INFLATION`].
     pub fn new(model: &'a ActionModel) -> Result<Classifier<'a>> {
+        Self::with_partial_inflation(model, PARTIAL_COV_INFLATION)
+    }
+
+    /// A classifier whose partial-sequence models add `sigma²·I` (metres²) to every state's
+    /// covariance (0: the trained covariances).
+    pub fn with_partial_inflation(model: &'a ActionModel, sigma: f64) -> Result<Classifier<'a>> {
+        if !(sigma.is_finite() && sigma >= 0.0) {
+            return Err(Error::Config(format!(
+                "the partial-sequence covariance inflation must be a finite σ ≥ 0, not {sigma}"
+            )));
+        }
         let truncated = model
             .actions
             .iter()
             .map(|a| {
-                truncate(&a.phmm).map_err(|e| Error::Model {
+                partial_model(&a.phmm, sigma).map_err(|e| Error::Model {
                     context: format!("action `{}`", a.name),
                     message: e.to_string(),
                 })
@@ -270,12 +299,15 @@ impl<'a> Classifier<'a> {
             model,
             truncated,
             multi_start: false,
+            partial_prior: true,
         })
     }
 
     /// Classifies a sequence (T × 9, actor frame). `partial`: the sequence is the beginning of
-    /// an action only (the models' exit is ignored and θ is estimated by the MAP variant with
-    /// each action's training θ distribution as the prior).
+    /// an action only: it is scored by a forward pass that may end in any state (the models'
+    /// exit ignored), with the covariances inflated (see [`PARTIAL_COV_INFLATION`]), and θ is
+    /// estimated by EM from the training θ mean and a 3 × 3 grid spanning the training θ
+    /// (corners included), keeping the best objective (see [`Classifier::partial_prior`]).
     pub fn classify(&self, x: &DMatrix<f64>, partial: bool) -> Result<Classification> {
         let mut scores = Vec::new();
         for (a, trunc) in self.model.actions.iter().zip(&self.truncated) {
@@ -284,21 +316,8 @@ impl<'a> Classifier<'a> {
                 message: e.to_string(),
             };
             let est = if partial {
-                let mean = DVector::from_row_slice(&a.theta_mean);
-                let c = a.theta_cov;
-                // Guard against a degenerate training spread (all θ equal): at least 1 cm².
-                let prior_cov = DMatrix::from_row_slice(
-                    2,
-                    2,
-                    &[c[0][0].max(1e-4), c[0][1], c[1][0], c[1][1].max(1e-4)],
-                );
-                // Multi-start over a 3 × 3 grid spanning the training θ (and the mean): early
-                // frames leave the θ posterior multi-modal. Keep the best log-posterior.
-                let inv = prior_cov
-                    .clone()
-                    .try_inverse()
-                    .unwrap_or_else(|| DMatrix::identity(2, 2));
-                let mut starts = vec![mean.clone()];
+                // Early frames leave the likelihood over θ multi-modal: several starts.
+                let mut starts = vec![DVector::from_row_slice(&a.theta_mean)];
                 for fx in [0.0, 0.5, 1.0] {
                     for fy in [0.0, 0.5, 1.0] {
                         starts.push(DVector::from_row_slice(&[
@@ -307,28 +326,48 @@ impl<'a> Classifier<'a> {
                         ]));
                     }
                 }
+                // MAP: prior = the action's training θ mean and covariance (at least 1 cm² per
+                // axis against a degenerate spread); it keeps early cuts, where W ≈ 0 leaves the
+                // likelihood flat, on the table. The objective is the log-posterior.
+                let mean = DVector::from_row_slice(&a.theta_mean);
+                let c = a.theta_cov;
+                let prior_cov = DMatrix::from_row_slice(
+                    2,
+                    2,
+                    &[c[0][0].max(1e-4), c[0][1], c[1][0], c[1][1].max(1e-4)],
+                );
+                let inv = prior_cov
+                    .clone()
+                    .try_inverse()
+                    .unwrap_or_else(|| DMatrix::identity(2, 2));
                 let mut best: Option<(f64, actrack_phmm::ThetaEstimate)> = None;
                 for init in starts {
                     let opts = ThetaEmOptions {
                         init: Some(init),
-                        prior: Some((mean.clone(), prior_cov.clone())),
+                        prior: self
+                            .partial_prior
+                            .then(|| (mean.clone(), prior_cov.clone())),
                         ..ThetaEmOptions::default()
                     };
                     let est = trunc.estimate_theta(x, &opts).map_err(err)?;
                     let d = &est.theta - &mean;
-                    let objective = est.log_likelihood - 0.5 * (d.transpose() * &inv * &d)[(0, 0)];
+                    let objective = if self.partial_prior {
+                        est.log_likelihood - 0.5 * (d.transpose() * &inv * &d)[(0, 0)]
+                    } else {
+                        est.log_likelihood
+                    };
                     if best.as_ref().is_none_or(|(o, _)| objective > *o) {
                         best = Some((objective, est));
                     }
                 }
-                match best {
-                    Some((_, est)) => est,
-                    None => return Err(Error::Config("no θ start".into())),
-                }
+                best.map(|(_, e)| e)
+                    .ok_or_else(|| Error::Config("no θ start".into()))?
             } else {
-                a.phmm
-                    .estimate_theta(x, &ThetaEmOptions::default())
-                    .map_err(err)?
+                let opts = ThetaEmOptions {
+                    multi_start: self.multi_start,
+                    ..ThetaEmOptions::default()
+                };
+                a.phmm.estimate_theta(x, &opts).map_err(err)?
             };
             scores.push(ActionScore {
                 action: a.name.clone(),
@@ -352,6 +391,12 @@ impl<'a> Classifier<'a> {
 /// The same parametric HMM without exit modelling (`EndMode::None`, `a_NN = 1`), for sequences
 /// that stop before the action ends.
 pub fn truncate(phmm: &Phmm) -> Result<Phmm, actrack_phmm::PhmmError> {
+    partial_model(phmm, 0.0)
+}
+
+/// [`truncate`], with `sigma²·I` added to every state's covariance (see
+/// [`PARTIAL_COV_INFLATION`]).
+pub fn partial_model(phmm: &Phmm, sigma: f64) -> Result<Phmm, actrack_phmm::PhmmError> {
     let n = phmm.n_states();
     let start: Vec<f64> = (0..n).map(|i| phmm.start_prob(i)).collect();
     let mut a = DMatrix::from_fn(n, n, |i, j| phmm.transition(i, j));
@@ -372,7 +417,11 @@ pub fn truncate(phmm: &Phmm) -> Result<Phmm, actrack_phmm::PhmmError> {
         let (b, w) = phmm.mean_affine(i);
         bias.push(b);
         weights.push(w);
-        covs.push(phmm.covariance(i).clone());
+        let mut c = phmm.covariance(i).clone();
+        for k in 0..c.nrows() {
+            c[(k, k)] += sigma * sigma;
+        }
+        covs.push(c);
     }
     Phmm::from_params(
         &start,

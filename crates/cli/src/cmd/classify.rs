@@ -36,17 +36,34 @@ pub struct Args {
     /// A manifest listing many labelled trials (its preprocessing is ignored: the model's applies).
     #[arg(long)]
     pub manifest: Option<PathBuf>,
-    /// Classify only the first fraction of each trial (0 < f ≤ 1; partial sequences use the MAP
-    /// θ estimate and ignore the models' exit).
+    /// Classify only the first fraction of each trial (0 < f ≤ 1; partial sequences are scored
+    /// without the models' exit, with inflated covariances, θ by EM from several starts).
     #[arg(long, default_value_t = 1.0)]
     pub fraction: f64,
     /// What `--fraction` is a fraction of: the movement (rest phases trimmed) or the whole
     /// recording.
     #[arg(long, value_enum, default_value = "movement")]
     pub fraction_of: Of,
+    /// Partial sequences: σ in metres of the isotropic noise added to every state's covariance
+    /// (0 = the trained covariances).
+    #[arg(long, default_value_t = actrack::train::PARTIAL_COV_INFLATION)]
+    pub partial_sigma: f64,
+    /// Partial sequences: the θ prior (`training`: each action's training θ mean and
+    /// covariance, MAP; `none`: maximum likelihood).
+    #[arg(long, value_enum, default_value = "training")]
+    pub partial_prior: PartialPrior,
     /// Print JSON.
     #[arg(long)]
     pub json: bool,
+}
+
+/// The θ prior for partial sequences.
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub enum PartialPrior {
+    /// The action's training θ mean and covariance (MAP).
+    Training,
+    /// None (maximum likelihood).
+    None,
 }
 
 /// What a fraction of a trial is a fraction of.
@@ -95,7 +112,15 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
     if let Some(b) = &bar {
         b.finish_and_clear();
     }
-    let classifier = Classifier::new(&model)?;
+    if !(args.partial_sigma.is_finite() && args.partial_sigma >= 0.0) {
+        return Err(super::UsageError(format!(
+            "--partial-sigma must be a finite number ≥ 0, not {}",
+            args.partial_sigma
+        ))
+        .into());
+    }
+    let mut classifier = Classifier::with_partial_inflation(&model, args.partial_sigma)?;
+    classifier.partial_prior = matches!(args.partial_prior, PartialPrior::Training);
     let of = match args.fraction_of {
         Of::Movement => FractionOf::Movement,
         Of::Recording => FractionOf::Recording,
