@@ -152,7 +152,7 @@ impl Default for TrackOptions {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum ThetaPrior {
     /// Each action draws θ from the box of its own training targets, padded by
-    /// [`THETA_PRIOR_PAD`], and θ is reflected at that box enlarged by 1.25 (not in the SPEC:
+    /// [`THETA_PRIOR_PAD`] and clipped to the scene's table region, and θ is reflected at that box enlarged by 1.25 (not in the SPEC:
     /// a linear PHMM extrapolated far outside the targets it was trained on generates
     /// implausible poses, which measurably costs accuracy and recognition on real motion, see
     /// docs/results.md).
@@ -165,15 +165,34 @@ pub enum ThetaPrior {
 /// Padding of the per-action θ prior around the action's training targets (metres).
 pub const THETA_PRIOR_PAD: f64 = 0.05;
 
-/// The box of every action's training targets, padded by `pad` (actor frame, metres).
-pub fn training_theta_regions(model: &ActionModel, pad: f64) -> Vec<TableRegion> {
+/// The box of every action's training targets, padded by `pad` and clipped to the prior region
+/// `(centre, half_extents)` (actor frame, metres). An action whose padded box misses the region
+/// keeps its padded box.
+pub fn training_theta_regions(
+    model: &ActionModel,
+    pad: f64,
+    region: ([f64; 2], [f64; 2]),
+) -> Vec<TableRegion> {
+    let (rc, rh) = region;
     model
         .actions
         .iter()
         .map(|a| {
             let centre = [0, 1].map(|c| 0.5 * (a.theta_min[c] + a.theta_max[c]));
             let half = [0, 1].map(|c| 0.5 * (a.theta_max[c] - a.theta_min[c]) + pad);
-            TableRegion::new(centre, half)
+            let lo = [0, 1].map(|c| centre[c] - half[c]);
+            let hi = [0, 1].map(|c| centre[c] + half[c]);
+            let clipped = (0..2).any(|c| lo[c] < rc[c] - rh[c] || hi[c] > rc[c] + rh[c]);
+            let clo = [0, 1].map(|c| lo[c].max(rc[c] - rh[c]));
+            let chi = [0, 1].map(|c| hi[c].min(rc[c] + rh[c]));
+            if !clipped || !(0..2).all(|c| chi[c] > clo[c]) {
+                TableRegion::new(centre, half)
+            } else {
+                TableRegion::new(
+                    [0, 1].map(|c| 0.5 * (clo[c] + chi[c])),
+                    [0, 1].map(|c| 0.5 * (chi[c] - clo[c])),
+                )
+            }
         })
         .collect()
 }
@@ -216,7 +235,11 @@ impl Pipeline {
             .particles(opts.particles)
             .seed(opts.seed);
         if opts.theta_prior == ThetaPrior::Training {
-            builder = builder.action_regions(training_theta_regions(model, THETA_PRIOR_PAD));
+            builder = builder.action_regions(training_theta_regions(
+                model,
+                THETA_PRIOR_PAD,
+                (centre, half),
+            ));
         }
         let config = builder
             .build()

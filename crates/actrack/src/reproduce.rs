@@ -319,7 +319,7 @@ pub fn tracker_config(model: &ActionModel, cond: &Condition) -> Result<TrackerCo
         .sigma_end_ratio(cond.sigma_end_ratio)
         .pose_sampling(cond.pose_sampling);
     if cond.per_action_theta {
-        b = b.action_regions(training_theta_regions(model, REGION_PAD));
+        b = b.action_regions(training_theta_regions(model, REGION_PAD, (centre, half)));
     }
     b.build()
         .map_err(|e| Error::Config(format!("tracker: {e}")))
