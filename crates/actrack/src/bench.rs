@@ -464,14 +464,12 @@ impl Runner {
         for (v, img) in views.iter().enumerate().take(self.workspaces.len()) {
             let view = ImageView::rgb8(&img.data, img.width, img.height)
                 .map_err(|e| Error::Config(format!("bench: {e}")))?;
-            let g = self.workspaces[v]
-                .compute(view, &self.params[v])
-                .map_err(|e| Error::Config(format!("bench: {e}")))?;
-            if let Some(e) = self.edges.get_mut(v) {
-                e.clone_from(g);
-            } else {
-                self.edges.push(g.clone());
+            if self.edges.len() <= v {
+                self.edges.push(EdgeImage::default());
             }
+            self.workspaces[v]
+                .compute_into(view, &self.params[v], &mut self.edges[v])
+                .map_err(|e| Error::Config(format!("bench: {e}")))?;
         }
         let edge_ms = t0.elapsed().as_secs_f64() * 1e3;
         let base = Instant::now();

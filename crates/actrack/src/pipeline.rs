@@ -217,6 +217,8 @@ pub struct Pipeline {
     likelihood: LikelihoodModel,
     tracker: Tracker,
     workspaces: Vec<EdgeWorkspace>,
+    /// The current frame's edge images, one per view used (buffers reused across frames).
+    edges: Vec<EdgeImage>,
     names: Vec<String>,
 }
 
@@ -256,6 +258,7 @@ impl Pipeline {
             likelihood,
             tracker,
             workspaces: scene.cameras.iter().map(|_| EdgeWorkspace::new()).collect(),
+            edges: Vec::with_capacity(scene.cameras.len()),
             names,
         })
     }
@@ -278,8 +281,9 @@ impl Pipeline {
     /// One step on synchronised images, one per camera (fewer: the missing views carry no
     /// contour). Errors name the frame when an image does not fit its camera.
     pub fn step(&mut self, frame: usize, images: &[&RgbImage]) -> Result<FrameResult> {
-        let mut edges = Vec::with_capacity(images.len());
-        for (v, img) in images.iter().enumerate().take(self.scene.cameras.len()) {
+        let views = images.len().min(self.scene.cameras.len());
+        self.edges.resize_with(views, EdgeImage::default);
+        for (v, img) in images.iter().enumerate().take(views) {
             let cam = &self.scene.cameras[v];
             if img.dimensions() != (cam.width, cam.height) {
                 return Err(Error::Config(format!(
@@ -293,16 +297,15 @@ impl Pipeline {
             }
             let view = ImageView::rgb8(img.as_raw(), img.width(), img.height())
                 .map_err(|e| Error::Config(format!("frame {frame}: {e}")))?;
-            let g = self.workspaces[v]
-                .compute(view, &edge_params(cam.width))
+            self.workspaces[v]
+                .compute_into(view, &edge_params(cam.width), &mut self.edges[v])
                 .map_err(|e| Error::Config(format!("frame {frame}: {e}")))?;
-            edges.push(g.clone());
         }
         let obs = SceneObservation {
             scene: &self.scene,
             geometry: &self.geometry,
             likelihood: &self.likelihood,
-            edges: &edges,
+            edges: &self.edges,
         };
         let estimate = self.tracker.step(&obs);
         let best_world = self.scene.pose_to_world(&estimate.best_pose);

@@ -238,7 +238,22 @@ impl EdgeWorkspace {
         }
     }
 
-    /// The last result.
+    /// [`EdgeWorkspace::compute`] into `out` without copying: the result's buffer is swapped
+    /// into `out` and `out`'s old buffer becomes the workspace's next output buffer, so a caller
+    /// that keeps its images across frames allocates nothing after the first two frames.
+    pub fn compute_into(
+        &mut self,
+        frame: ImageView<'_>,
+        params: &EdgeParams,
+        out: &mut EdgeImage,
+    ) -> Result<(), RenderError> {
+        self.compute(frame, params)?;
+        std::mem::swap(&mut self.out, out);
+        Ok(())
+    }
+
+    /// The last result ([`EdgeWorkspace::compute`]; after [`EdgeWorkspace::compute_into`] it
+    /// holds the caller's previous image).
     pub fn edge_image(&self) -> &EdgeImage {
         &self.out
     }
@@ -658,6 +673,31 @@ mod tests {
                 assert!((max_value(g.data()) - 1.0).abs() < 1e-6);
             }
         }
+    }
+
+    /// `compute_into` gives what `compute` gives and only trades buffers with the caller.
+    #[test]
+    fn compute_into_swaps_without_copying() {
+        let (w, h) = (45usize, 37usize);
+        let a = test_frame(w, h);
+        let b: Vec<u8> = a.iter().rev().copied().collect();
+        let mut ws = EdgeWorkspace::new();
+        let mut reference = EdgeWorkspace::new();
+        let mut out = EdgeImage::default();
+        let p = EdgeParams::default();
+        for rgb in [&a, &b, &a] {
+            let frame = ImageView::rgb8(rgb, w as u32, h as u32).unwrap();
+            ws.compute_into(frame, &p, &mut out).unwrap();
+            assert_eq!(&out, reference.compute(frame, &p).unwrap());
+        }
+        // After two frames the two buffers just trade places: no new allocation.
+        let before = out.data.as_ptr();
+        let frame = ImageView::rgb8(&b, w as u32, h as u32).unwrap();
+        ws.compute_into(frame, &p, &mut out).unwrap();
+        ws.compute_into(frame, &p, &mut out).unwrap();
+        assert_eq!(out.data.as_ptr(), before);
+        let bad = ImageView::rgb8(&b, 0, 0);
+        assert!(bad.is_err() || ws.compute_into(bad.unwrap(), &p, &mut out).is_err());
     }
 
     /// The variant chosen at run time (AVX2 on most x86-64 machines) gives the same G, bit for
