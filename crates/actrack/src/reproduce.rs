@@ -16,8 +16,10 @@
 use std::collections::BTreeMap;
 use std::time::Instant;
 
-use actrack_pf::{PoseSampling, TableRegion as PfRegion, Tracker, TrackerConfig};
-use actrack_render::{ContourMethod, EdgeWorkspace, ImageView, LikelihoodModel, contour_points};
+use actrack_pf::{TableRegion as PfRegion, Tracker, TrackerConfig};
+use actrack_render::{
+    ContourMethod, EdgeImage, EdgeWorkspace, ImageView, LikelihoodModel, contour_points,
+};
 use image::RgbImage;
 use nalgebra::Vector3;
 use rayon::prelude::*;
@@ -210,8 +212,6 @@ pub struct Condition {
     pub noise: f64,
     /// σ(N)/σ(0) of the cooling schedule (1 = no cooling).
     pub sigma_end_ratio: f64,
-    /// How particles generate poses (SPEC: one Gaussian draw per particle and frame).
-    pub pose_sampling: PoseSampling,
     /// Whether each action draws θ from the box of its own training targets (padded) instead
     /// of the common region.
     pub per_action_theta: bool,
@@ -231,7 +231,6 @@ impl Condition {
             clutter: 40,
             noise: 3.0,
             sigma_end_ratio: 1.0 / 16.0,
-            pose_sampling: PoseSampling::Gaussian { samples: 1 },
             per_action_theta: true,
             seed: 9,
         }
@@ -316,8 +315,7 @@ pub fn tracker_config(model: &ActionModel, cond: &Condition) -> Result<TrackerCo
     let mut b = TrackerConfig::builder(PfRegion::new(centre, half))
         .particles(cond.particles)
         .seed(cond.seed)
-        .sigma_end_ratio(cond.sigma_end_ratio)
-        .pose_sampling(cond.pose_sampling);
+        .sigma_end_ratio(cond.sigma_end_ratio);
     if cond.per_action_theta {
         b = b.action_regions(training_theta_regions(model, REGION_PAD, (centre, half)));
     }
@@ -363,6 +361,7 @@ pub fn run_video(
         message: e.to_string(),
     })?;
     let mut workspaces: Vec<EdgeWorkspace> = cams.iter().map(|_| EdgeWorkspace::new()).collect();
+    let mut edges: Vec<EdgeImage> = cams.iter().map(|_| EdgeImage::default()).collect();
     let mut track = Trajectory {
         actions: names.clone(),
         rows: Vec::new(),
@@ -402,14 +401,12 @@ pub fn run_video(
             }
             render_ms.push(t0.elapsed().as_secs_f64() * 1e3);
             let t1 = Instant::now();
-            let mut edges = Vec::with_capacity(images.len());
             for (v, img) in images.iter().enumerate() {
                 let view = ImageView::rgb8(img.as_raw(), img.width(), img.height())
                     .map_err(|e| Error::Config(format!("frame {frame}: {e}")))?;
-                let g = workspaces[v]
-                    .compute(view, &edge_params(img.width()))
+                workspaces[v]
+                    .compute_into(view, &edge_params(img.width()), &mut edges[v])
                     .map_err(|e| Error::Config(format!("frame {frame}: {e}")))?;
-                edges.push(g.clone());
             }
             let obs = SceneObservation::new(scene, &geometry, &likelihood, &edges);
             let estimate = tracker.step(&obs);

@@ -12,7 +12,7 @@ const MAX_COORD: f64 = 1.0e6;
 /// Maximal sagitta (pixels) of the polygons approximating arcs in the raster silhouette.
 const SAGITTA: f64 = 0.15;
 /// Analytic samples deeper than this (pixels) inside another part are not on the union outline.
-const INSIDE_TOL: f64 = 0.5;
+pub(crate) const INSIDE_TOL: f64 = 0.5;
 
 /// How the contour C of a pose is obtained (SPEC §4.2). Record which one was used: the scores
 /// differ slightly.
@@ -56,7 +56,7 @@ pub enum Part2 {
 
 /// A part with everything the contour routines need precomputed.
 #[derive(Debug, Clone, Copy)]
-enum Prepared {
+pub(crate) enum Prepared {
     Circle {
         c: Vector2<f64>,
         r: f64,
@@ -204,7 +204,7 @@ impl Prepared {
     }
 
     /// Axis-aligned bounding box (min u, min v, max u, max v).
-    fn bbox(&self) -> [f64; 4] {
+    pub(crate) fn bbox(&self) -> [f64; 4] {
         match *self {
             Self::Circle { c, r } => [c.x - r, c.y - r, c.x + r, c.y + r],
             Self::Capsule { c0, c1, r0, r1, .. } => [
@@ -506,7 +506,7 @@ impl Projected {
         }
     }
 
-    fn iter(&self) -> impl Iterator<Item = &Prepared> {
+    pub(crate) fn iter(&self) -> impl Iterator<Item = &Prepared> {
         self.parts[..self.n].iter().flatten()
     }
 

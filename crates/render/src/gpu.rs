@@ -4,8 +4,8 @@
 //! # How the work is split
 //!
 //! * CPU, per particle and view (f64): the projection of the three arm parts
-//!   ([`crate::project_parts`], pinhole + Brown), the part set-up the analytic sampler uses
-//!   (degenerate capsules become discs, tangent angles, bounding-box rejection) and the number
+//!   (pinhole + Brown) into the analytic sampler's own prepared parts (degenerate capsules
+//!   become discs, tangent angles; bounding-box rejection) and the number
 //!   of samples on each line and arc of every outline. These are the discrete decisions of the
 //!   sampler, so they are taken exactly as [`crate::LikelihoodModel`] takes them.
 //! * GPU, one workgroup of 64 threads per (particle, view): the sample points (lines by
@@ -34,14 +34,11 @@ use std::sync::{Arc, Mutex, mpsc};
 use bytemuck::{Pod, Zeroable};
 use nalgebra::Vector2;
 
+use crate::contour::{INSIDE_TOL, Prepared, project_prepared};
 use crate::{
-    ArmGeometry, Camera, ContourMethod, EdgeImage, LikelihoodModel, Part2, RenderError,
-    RenderScratch, project_parts,
+    ArmGeometry, Camera, ContourMethod, EdgeImage, LikelihoodModel, RenderError, RenderScratch,
 };
 
-/// Samples deeper than this (pixels) inside another part are not on the union outline (the
-/// CPU sampler's constant).
-const INSIDE_TOL: f64 = 0.5;
 /// Spacing Δ of analytic samples, pixels (the CPU default).
 const SPACING: f64 = 2.0;
 /// Pieces (lines and arcs) per (particle, view): three parts of at most four pieces.
@@ -124,92 +121,7 @@ struct GpuPart {
 // The WGSL layouts of `Piece` and `Part` (16-byte aligned structs).
 const _: () = assert!(size_of::<GpuPiece>() == 64 && size_of::<GpuPart>() == 96);
 
-/// The part set-up of the CPU sampler (`contour::Prepared`), in f64.
-#[derive(Debug, Clone, Copy)]
-enum Prep {
-    Circle {
-        c: Vector2<f64>,
-        r: f64,
-    },
-    Capsule {
-        c0: Vector2<f64>,
-        c1: Vector2<f64>,
-        r0: f64,
-        r1: f64,
-        len: f64,
-        d: Vector2<f64>,
-        n: Vector2<f64>,
-        sin_a: f64,
-        cos_a: f64,
-    },
-    Ellipse {
-        c: Vector2<f64>,
-        a: f64,
-        b: f64,
-        ea: Vector2<f64>,
-        eb: Vector2<f64>,
-    },
-}
-
-impl Prep {
-    fn new(part: &Part2) -> Self {
-        match *part {
-            Part2::Capsule { c0, c1, r0, r1 } => {
-                let (c0, c1) = (Vector2::from(c0), Vector2::from(c1));
-                let delta = c1 - c0;
-                let len = delta.norm();
-                if len <= (r0 - r1).abs() + 1e-9 {
-                    return if r0 >= r1 {
-                        Self::Circle { c: c0, r: r0 }
-                    } else {
-                        Self::Circle { c: c1, r: r1 }
-                    };
-                }
-                let d = delta / len;
-                let sin_a = (r0 - r1) / len;
-                let cos_a = (1.0 - sin_a * sin_a).max(0.0).sqrt();
-                Self::Capsule {
-                    c0,
-                    c1,
-                    r0,
-                    r1,
-                    len,
-                    d,
-                    n: Vector2::new(-d.y, d.x),
-                    sin_a,
-                    cos_a,
-                }
-            }
-            Part2::Ellipse { c, a, b, angle } => {
-                let (s, co) = angle.sin_cos();
-                Self::Ellipse {
-                    c: Vector2::from(c),
-                    a,
-                    b,
-                    ea: Vector2::new(co, s),
-                    eb: Vector2::new(-s, co),
-                }
-            }
-        }
-    }
-
-    fn bbox(&self) -> [f64; 4] {
-        match *self {
-            Self::Circle { c, r } => [c.x - r, c.y - r, c.x + r, c.y + r],
-            Self::Capsule { c0, c1, r0, r1, .. } => [
-                (c0.x - r0).min(c1.x - r1),
-                (c0.y - r0).min(c1.y - r1),
-                (c0.x + r0).max(c1.x + r1),
-                (c0.y + r0).max(c1.y + r1),
-            ],
-            Self::Ellipse { c, a, b, ea, .. } => {
-                let ex = (a * a * ea.x * ea.x + b * b * ea.y * ea.y).sqrt();
-                let ey = (a * a * ea.y * ea.y + b * b * ea.x * ea.x).sqrt();
-                [c.x - ex, c.y - ey, c.x + ex, c.y + ey]
-            }
-        }
-    }
-
+impl Prepared {
     /// The part for the inside test.
     fn gpu_part(&self) -> GpuPart {
         let mut g = GpuPart::default();
@@ -925,15 +837,11 @@ impl GpuLikelihood {
         let geometry = self.cpu.geometry();
         for pose in poses.iter().filter(|p| p.iter().all(|v| v.is_finite())) {
             for (v, cam) in self.cpu.cameras().iter().enumerate() {
-                let projected = project_parts(cam, geometry, pose);
-                let mut prep = [None; PARTS_PER_JOB];
-                for (slot, part) in prep.iter_mut().zip(&projected) {
-                    *slot = Some(Prep::new(part));
-                }
+                let projected = project_prepared(cam, geometry, pose);
                 let start = st.pieces.len();
                 let (wf, hf) = (f64::from(cam.width) - 0.5, f64::from(cam.height) - 0.5);
                 let mut n_parts = 0u32;
-                for (i, p) in prep.iter().flatten().enumerate() {
+                for (i, p) in projected.iter().enumerate() {
                     st.parts.push(p.gpu_part());
                     n_parts += 1;
                     let bb = p.bbox();
@@ -1067,10 +975,8 @@ mod tests {
     use rand_pcg::Pcg64Mcg;
 
     use super::*;
-    use crate::synth::{Body, SceneSynth, Table};
+    use crate::tests::{SHOULDER, scene};
     use crate::{EdgeParams, EdgeWorkspace, correct_arm};
-
-    const SHOULDER: [f64; 3] = [0.2, 0.0, 1.2];
 
     fn gpu(cams: Vec<Camera>) -> Option<GpuLikelihood> {
         match GpuLikelihood::new(cams, ArmGeometry::default(), 0.15) {
@@ -1098,19 +1004,6 @@ mod tests {
         .unwrap();
         c.distortion = distortion;
         c
-    }
-
-    fn scene() -> SceneSynth {
-        SceneSynth::new(
-            ArmGeometry::default(),
-            Some(Table {
-                center: [0.0, 0.5, 0.75],
-                half_extents: [0.8, 0.45],
-                yaw: 0.0,
-                thickness: 0.04,
-            }),
-            Some(Body::for_shoulder(SHOULDER, [0.0, 1.0], true)),
-        )
     }
 
     fn true_pose() -> [f64; 9] {

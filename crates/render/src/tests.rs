@@ -10,7 +10,7 @@ use crate::{
     LikelihoodModel, RenderError, correct_arm,
 };
 
-const SHOULDER: [f64; 3] = [0.2, 0.0, 1.2];
+pub(crate) const SHOULDER: [f64; 3] = [0.2, 0.0, 1.2];
 
 fn camera(w: u32, h: u32) -> Camera {
     // Across the table, facing the actor, a little to the side and above.
@@ -25,7 +25,8 @@ fn camera(w: u32, h: u32) -> Camera {
     .unwrap()
 }
 
-fn scene() -> SceneSynth {
+/// The test scene: default arm, a table in front, a body behind the shoulder.
+pub(crate) fn scene() -> SceneSynth {
     SceneSynth::new(
         ArmGeometry::default(),
         Some(Table {
