@@ -52,6 +52,10 @@ pub struct Args {
     /// covariance, MAP; `none`: maximum likelihood).
     #[arg(long, value_enum, default_value = "training")]
     pub partial_prior: PartialPrior,
+    /// Whole sequences: also start θ-EM from every distinct training θ of the action and keep
+    /// the best log-likelihood (slower; partial sequences always use several starts).
+    #[arg(long)]
+    pub multi_start: bool,
     /// Print JSON.
     #[arg(long)]
     pub json: bool,
@@ -121,6 +125,7 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
     }
     let mut classifier = Classifier::with_partial_inflation(&model, args.partial_sigma)?;
     classifier.partial_prior = matches!(args.partial_prior, PartialPrior::Training);
+    classifier.multi_start = args.multi_start;
     let of = match args.fraction_of {
         Of::Movement => FractionOf::Movement,
         Of::Recording => FractionOf::Recording,
