@@ -123,11 +123,9 @@ impl Prepared {
         }
     }
 
-    /// Whether `x` is more than [`INSIDE_TOL`] pixels inside the part (no square roots).
-    // Measured: with plain `#[inline]` LLVM keeps this out of line once the sample loop has six
-    // specialisations: +1.3k Ir per likelihood call and ~2 % slower (perf example).
-    #[allow(clippy::inline_always)]
-    #[inline(always)]
+    /// Whether `x` is more than [`INSIDE_TOL`] pixels inside the part (no square roots): the
+    /// scalar reference of the sampler's four-lane test ([`Inside::deep`]).
+    #[cfg(test)]
     fn deep_inside(&self, x: Vector2<f64>) -> bool {
         let within = |d2: f64, r: f64| r > INSIDE_TOL && d2 < (r - INSIDE_TOL) * (r - INSIDE_TOL);
         match *self {
@@ -298,103 +296,189 @@ impl Prepared {
     }
 }
 
-/// One run of analytic outline samples. [`Prepared::sample_runs`] yields, run after run, exactly
-/// the points (same arithmetic, same order) of `walk_outline(step, false, …)`, but as plain data
-/// that a caller can loop over without nested closures, so that its accumulators stay in
-/// registers.
+/// Lanes of the analytic sampler: samples are generated, tested and summed four at a time
+/// (four f64 lanes: one AVX2 register, two SSE2 registers).
+const LANES: usize = 4;
+/// One value per lane.
+type Lanes = [f64; LANES];
+/// The sample index of each lane in the first chunk of a run.
+const LANE_INDEX: Lanes = [0.0, 1.0, 2.0, 3.0];
+
+/// `f(l)` for every lane `l`.
+#[allow(clippy::inline_always)]
+#[inline(always)]
+fn lanes<T: Copy + Default, F: Fn(usize) -> T>(f: F) -> [T; LANES] {
+    let mut out = [T::default(); LANES];
+    for (l, o) in out.iter_mut().enumerate() {
+        *o = f(l);
+    }
+    out
+}
+
+/// `(sin θ, cos θ)`; for |θ| ≤ ½ (the arcs of every part wider than a few pixels) by the
+/// Taylor polynomials to θ¹³ / θ¹⁴ (truncation < 1e-16), otherwise by libm.
+fn sin_cos(theta: f64) -> (f64, f64) {
+    if theta.abs() > 0.5 {
+        return theta.sin_cos();
+    }
+    let z = theta * theta;
+    let s = theta
+        * (1.0
+            + z * (-1.0 / 6.0
+                + z * (1.0 / 120.0
+                    + z * (-1.0 / 5040.0
+                        + z * (1.0 / 362_880.0
+                            + z * (-1.0 / 39_916_800.0 + z * (1.0 / 6_227_020_800.0)))))));
+    let c = 1.0
+        + z * (-0.5
+            + z * (1.0 / 24.0
+                + z * (-1.0 / 720.0
+                    + z * (1.0 / 40_320.0
+                        + z * (-1.0 / 3_628_800.0
+                            + z * (1.0 / 479_001_600.0 + z * (-1.0 / 87_178_291_200.0)))))));
+    (s, c)
+}
+
+/// One run of analytic outline samples, generated [`LANES`] at a time. The points are those of
+/// `walk_outline(step, false, …)` (same count and order, equal up to rounding).
 #[derive(Debug, Clone, Copy)]
 enum Run {
-    /// `n` points `c + v`, with `v` rotated clockwise by the angle of (co, s) after each point.
-    Arc {
-        c: Vector2<f64>,
-        v: Vector2<f64>,
-        co: f64,
-        s: f64,
-        n: usize,
-    },
-    /// `n` points `c + ea·(a·cos t) + eb·(b·sin t)`, t decreasing by the angle of (cd, sd).
-    Ellipse {
-        c: Vector2<f64>,
-        a: f64,
-        b: f64,
-        ea: Vector2<f64>,
-        eb: Vector2<f64>,
-        cd: f64,
-        sd: f64,
-        n: usize,
-    },
-    /// `m` points `p + (q − p)·k/m`, k = 0 … m−1.
+    /// `n` points `p + k·s`, k = 0 … n−1.
     Line {
         p: Vector2<f64>,
-        q: Vector2<f64>,
-        m: usize,
+        s: Vector2<f64>,
+        n: usize,
+    },
+    /// `n` points `c + u·cos kθ + w·sin kθ`, k = 0 … n−1. `co`, `si`: cos and sin of kθ in
+    /// the lanes of the first chunk (k = 0 … 3); `cl`, `sl`: cos and sin of 4θ, the rotation
+    /// from one chunk to the next.
+    Trig {
+        c: Vector2<f64>,
+        u: Vector2<f64>,
+        w: Vector2<f64>,
+        co: Lanes,
+        si: Lanes,
+        cl: f64,
+        sl: f64,
+        n: usize,
     },
 }
 
 impl Run {
-    /// Calls `f` with every point of the run.
+    /// The `m` points `p + (q − p)·k/m`, k = 0 … m−1.
+    fn line(p: Vector2<f64>, q: Vector2<f64>, m: usize) -> Self {
+        Self::Line {
+            p,
+            s: (q - p) / m as f64,
+            n: m,
+        }
+    }
+
+    /// The `n` points `c + u·cos kθ + w·sin kθ`, k = 0 … n−1.
+    fn trig(c: Vector2<f64>, u: Vector2<f64>, w: Vector2<f64>, theta: f64, n: usize) -> Self {
+        let (s1, c1) = sin_cos(theta);
+        let (c2, s2) = (c1 * c1 - s1 * s1, 2.0 * c1 * s1);
+        let (c3, s3) = (c2 * c1 - s2 * s1, s2 * c1 + c2 * s1);
+        Self::Trig {
+            c,
+            u,
+            w,
+            co: [1.0, c1, c2, c3],
+            si: [0.0, s1, s2, s3],
+            cl: c2 * c2 - s2 * s2,
+            sl: 2.0 * c2 * s2,
+            n,
+        }
+    }
+
+    /// A clockwise arc (u right, v down: decreasing angle) of radius `r` around `c` from the
+    /// unit direction `from`, `n` points `θ = sweep / n` apart, the end point excluded.
+    fn arc(c: Vector2<f64>, r: f64, from: Vector2<f64>, sweep: f64, n: usize) -> Self {
+        Self::trig(
+            c,
+            from * r,
+            Vector2::new(from.y, -from.x) * r,
+            sweep / n as f64,
+            n,
+        )
+    }
+
+    /// Calls `f(u, v, ok)` for every chunk of [`LANES`] points; `ok` marks the lanes that hold
+    /// a point of the run (all but the tail of the last chunk).
     // Measured: with plain `#[inline]` LLVM keeps this out of line and the analytic likelihood is
     // ~12 % slower (perf example, same run).
     #[allow(clippy::inline_always)]
     #[inline(always)]
-    fn for_each<F: FnMut(Vector2<f64>)>(self, mut f: F) {
+    fn for_each_chunk<F: FnMut(Lanes, Lanes, [bool; LANES])>(self, mut f: F) {
         match self {
-            Self::Arc { c, mut v, co, s, n } => {
-                for _ in 0..n {
-                    f(c + v);
-                    v = Vector2::new(co * v.x + s * v.y, -s * v.x + co * v.y);
+            Self::Line { p, s, n } => {
+                let nf = n as f64;
+                let mut k = LANE_INDEX;
+                for _ in 0..n.div_ceil(LANES) {
+                    f(
+                        lanes(|l| p.x + k[l] * s.x),
+                        lanes(|l| p.y + k[l] * s.y),
+                        lanes(|l| k[l] < nf),
+                    );
+                    k = lanes(|l| k[l] + LANES as f64);
                 }
             }
-            Self::Ellipse {
+            Self::Trig {
                 c,
-                a,
-                b,
-                ea,
-                eb,
-                cd,
-                sd,
+                u,
+                w,
+                mut co,
+                mut si,
+                cl,
+                sl,
                 n,
             } => {
-                let (mut co, mut s) = (1.0f64, 0.0f64);
-                for _ in 0..n {
-                    f(c + ea * (a * co) + eb * (b * s));
-                    (co, s) = (co * cd + s * sd, s * cd - co * sd);
-                }
-            }
-            Self::Line { p, q, m } => {
-                // k as an f64 counter: exact (k < 2⁵³), so the same points as `k as f64`
-                // without a u64 → f64 conversion per point.
-                let (d, mf) = (q - p, m as f64);
-                let mut kf = 0.0f64;
-                for _ in 0..m {
-                    f(p + d * (kf / mf));
-                    kf += 1.0;
+                let nf = n as f64;
+                let mut k = LANE_INDEX;
+                for _ in 0..n.div_ceil(LANES) {
+                    f(
+                        lanes(|l| c.x + u.x * co[l] + w.x * si[l]),
+                        lanes(|l| c.y + u.y * co[l] + w.y * si[l]),
+                        lanes(|l| k[l] < nf),
+                    );
+                    (co, si) = (
+                        lanes(|l| co[l] * cl - si[l] * sl),
+                        lanes(|l| si[l] * cl + co[l] * sl),
+                    );
+                    k = lanes(|l| k[l] + LANES as f64);
                 }
             }
         }
+    }
+
+    /// Calls `f` with every point of the run, in order.
+    #[cfg(test)]
+    fn for_each<F: FnMut(Vector2<f64>)>(self, mut f: F) {
+        self.for_each_chunk(|u, v, ok| {
+            for l in 0..LANES {
+                if ok[l] {
+                    f(Vector2::new(u[l], v[l]));
+                }
+            }
+        });
     }
 }
 
 impl Prepared {
     /// The analytic samples every `step` pixels along the outline as at most four runs (see
-    /// [`Run`]); returns the runs and their number.
+    /// [`Run`]); returns the runs and their number. The sample counts are those of
+    /// `walk_outline` (and of the GPU port's pieces).
+    #[allow(clippy::inline_always)]
+    #[inline(always)]
     fn sample_runs(&self, step: f64) -> ([Run; 4], usize) {
         let arc_n = |r: f64, sweep: f64| ((r * sweep / step).ceil() as usize).clamp(1, 4096);
         let arc = |c: Vector2<f64>, r: f64, from: Vector2<f64>, sweep: f64| {
-            let n = arc_n(r, sweep);
-            let (s, co) = (sweep / n as f64).sin_cos();
-            Run::Arc {
-                c,
-                v: from * r,
-                co,
-                s,
-                n,
-            }
+            Run::arc(c, r, from, sweep, arc_n(r, sweep))
         };
         let none = Run::Line {
             p: Vector2::zeros(),
-            q: Vector2::zeros(),
-            m: 0,
+            s: Vector2::zeros(),
+            n: 0,
         };
         match *self {
             Self::Circle { c, r } => (
@@ -408,25 +492,9 @@ impl Prepared {
             ),
             Self::Ellipse { c, a, b, ea, eb } => {
                 let n = arc_n(a, std::f64::consts::TAU);
-                let (sd, cd) = (std::f64::consts::TAU / n as f64).sin_cos();
-                (
-                    [
-                        Run::Ellipse {
-                            c,
-                            a,
-                            b,
-                            ea,
-                            eb,
-                            cd,
-                            sd,
-                            n,
-                        },
-                        none,
-                        none,
-                        none,
-                    ],
-                    1,
-                )
+                // x = c + ea·a·cos t + eb·b·sin t with t = −kθ.
+                let run = Run::trig(c, ea * a, -eb * b, std::f64::consts::TAU / n as f64, n);
+                ([run, none, none, none], 1)
             }
             Self::Capsule {
                 c0,
@@ -446,17 +514,9 @@ impl Prepared {
                 let alpha = sin_a.asin();
                 (
                     [
-                        Run::Line {
-                            p: c0 + np * r0,
-                            q: c1 + np * r1,
-                            m,
-                        },
+                        Run::line(c0 + np * r0, c1 + np * r1, m),
                         arc(c1, r1, np, half - 2.0 * alpha),
-                        Run::Line {
-                            p: c1 + nm * r1,
-                            q: c0 + nm * r0,
-                            m,
-                        },
+                        Run::line(c1 + nm * r1, c0 + nm * r0, m),
                         arc(c0, r0, nm, half + 2.0 * alpha),
                     ],
                     4,
@@ -465,7 +525,6 @@ impl Prepared {
         }
     }
 }
-
 /// Per-thread scratch for rasterising silhouettes: a mask that only grows, and a reusable path
 /// builder. Reusing one per thread means no allocation per particle in our code (tiny-skia
 /// itself still allocates a small edge list per fill).
@@ -560,6 +619,56 @@ fn project_ellipsoid(
     centre: Vector3<f64>,
     axes: &[Vector3<f64>; 3],
 ) -> Option<Part2> {
+    let (c, a, b, [s00, s01, s11]) = ellipse_shape(cam, centre, axes)?;
+    let angle = 0.5 * (2.0 * s01).atan2(s00 - s11);
+    Some(Part2::Ellipse {
+        c: [c.x, c.y],
+        a,
+        b,
+        angle,
+    })
+}
+
+/// The projected hand as prepared for the contour routines: [`project_ellipsoid`] with the
+/// axis directions from the shape matrix by the half-angle formulas (no `atan2`, `sin_cos`).
+fn project_ellipsoid_prepared(
+    cam: &Camera,
+    centre: Vector3<f64>,
+    axes: &[Vector3<f64>; 3],
+) -> Option<Prepared> {
+    let (c, a, b, [s00, s01, s11]) = ellipse_shape(cam, centre, axes)?;
+    // (cos 2φ, sin 2φ) ∝ (s00 − s11, 2 s01), φ ∈ [−π/2, π/2] as `0.5·atan2`; the larger of
+    // cos φ, |sin φ| by a square root, the other from sin 2φ = 2 sin φ cos φ.
+    let (c2, s2) = (s00 - s11, 2.0 * s01);
+    let h = c2.hypot(s2);
+    let ea = if h > 0.0 {
+        let (c2, s2) = (c2 / h, s2 / h);
+        if c2 >= 0.0 {
+            let co = (0.5 * (1.0 + c2)).sqrt();
+            Vector2::new(co, s2 / (2.0 * co))
+        } else {
+            let si = (0.5 * (1.0 - c2)).sqrt().copysign(s2);
+            Vector2::new(s2 / (2.0 * si), si)
+        }
+    } else {
+        Vector2::x()
+    };
+    Some(Prepared::Ellipse {
+        c,
+        a,
+        b,
+        ea,
+        eb: Vector2::new(-ea.y, ea.x),
+    })
+}
+
+/// Centre, semi-axes and shape matrix `S = Σ_k (J a_k)(J a_k)ᵀ` (s00, s01, s11) of the
+/// projected hand.
+fn ellipse_shape(
+    cam: &Camera,
+    centre: Vector3<f64>,
+    axes: &[Vector3<f64>; 3],
+) -> Option<(Vector2<f64>, f64, f64, [f64; 3])> {
     let reach = axes.iter().map(nalgebra::Vector3::norm).fold(0.0, f64::max);
     if centre.z.is_nan() || centre.z - reach <= NEAR_PLANE {
         return None;
@@ -569,7 +678,6 @@ fn project_ellipsoid(
         return None;
     }
     let j = cam.project_camera_jacobian(&centre)?;
-    // Shape matrix S = Σ_k (J a_k)(J a_k)ᵀ.
     let (mut s00, mut s01, mut s11) = (0.0, 0.0, 0.0);
     for a in axes {
         let v = j * a;
@@ -581,13 +689,7 @@ fn project_ellipsoid(
     let dev = (0.25 * (s00 - s11) * (s00 - s11) + s01 * s01).sqrt();
     let a = (mean + dev).max(0.0).sqrt();
     let b = (mean - dev).max(0.0).sqrt();
-    let angle = 0.5 * (2.0 * s01).atan2(s00 - s11);
-    (a.is_finite() && b.is_finite() && a < MAX_COORD).then_some(Part2::Ellipse {
-        c: [c.x, c.y],
-        a,
-        b,
-        angle,
-    })
+    (a.is_finite() && b.is_finite() && a < MAX_COORD).then_some((c, a, b, [s00, s01, s11]))
 }
 
 /// Projects the three parts of a pose (upper arm, forearm, hand) into the camera. Parts behind
@@ -607,8 +709,8 @@ pub(crate) fn project_prepared(cam: &Camera, geometry: &ArmGeometry, pose: &[f64
     }
     let rot = cam.rotation_matrix();
     let axes = parts.hand_axes.map(|a| rot * a);
-    if let Some(part) = project_ellipsoid(cam, cam.to_camera(&parts.hand_centre), &axes) {
-        out.push(Prepared::new(&part));
+    if let Some(part) = project_ellipsoid_prepared(cam, cam.to_camera(&parts.hand_centre), &axes) {
+        out.push(part);
     }
     out
 }
@@ -652,12 +754,140 @@ pub(crate) fn part_polygon(part: &Part2, out: &mut Vec<[f64; 2]>) {
     Prepared::new(part).walk_outline(1.0, true, |x| out.push([x.x, x.y]));
 }
 
+/// A part in the form of the per-sample "more than [`INSIDE_TOL`] inside" test, four lanes at
+/// a time (no square roots, no divisions, no branches per lane).
+#[derive(Debug, Clone, Copy)]
+enum Inside {
+    /// Contains no point deeper than the tolerance.
+    Never,
+    /// `|x − c|² < r2`.
+    Disc { c: Vector2<f64>, r2: f64 },
+    /// The capsule test of [`Prepared::deep_inside`]: cap at c0 for `s < lo`, at c1 for
+    /// `s > hi`, the side lines between. `r0sq`, `r1sq`: squared cap radii less the tolerance
+    /// (−1 for caps too small to contain a point that deep).
+    Capsule {
+        c0: Vector2<f64>,
+        c1: Vector2<f64>,
+        d: Vector2<f64>,
+        n: Vector2<f64>,
+        lo: f64,
+        hi: f64,
+        r0sq: f64,
+        r1sq: f64,
+        sin_a: f64,
+        cos_a: f64,
+        lim: f64,
+    },
+    /// `(rel·ea/a)² + (rel·eb/b)² < k2`.
+    Ellipse {
+        c: Vector2<f64>,
+        ea: Vector2<f64>,
+        eb: Vector2<f64>,
+        k2: f64,
+    },
+}
+
+impl Inside {
+    fn new(part: &Prepared) -> Self {
+        let sq = |r: f64| {
+            if r > INSIDE_TOL {
+                (r - INSIDE_TOL) * (r - INSIDE_TOL)
+            } else {
+                -1.0
+            }
+        };
+        match *part {
+            Prepared::Circle { c, r } => Self::Disc { c, r2: sq(r) },
+            Prepared::Capsule {
+                c0,
+                c1,
+                r0,
+                r1,
+                len,
+                d,
+                n,
+                sin_a,
+                cos_a,
+            } => Self::Capsule {
+                c0,
+                c1,
+                d,
+                n,
+                lo: r0 * sin_a,
+                hi: len + r1 * sin_a,
+                r0sq: sq(r0),
+                r1sq: sq(r1),
+                sin_a,
+                cos_a,
+                lim: r0 - INSIDE_TOL,
+            },
+            Prepared::Ellipse { c, a, b, ea, eb } => {
+                if b <= INSIDE_TOL {
+                    return Self::Never;
+                }
+                let k = 1.0 - INSIDE_TOL / b;
+                Self::Ellipse {
+                    c,
+                    ea: ea / a,
+                    eb: eb / b,
+                    k2: k * k,
+                }
+            }
+        }
+    }
+
+    /// Per lane: whether the point is more than [`INSIDE_TOL`] inside the part.
+    #[allow(clippy::inline_always)]
+    #[inline(always)]
+    fn deep(&self, x: Lanes, y: Lanes) -> [bool; LANES] {
+        match *self {
+            Self::Never => [false; LANES],
+            Self::Disc { c, r2 } => lanes(|l| {
+                let (dx, dy) = (x[l] - c.x, y[l] - c.y);
+                dx * dx + dy * dy < r2
+            }),
+            Self::Capsule {
+                c0,
+                c1,
+                d,
+                n,
+                lo,
+                hi,
+                r0sq,
+                r1sq,
+                sin_a,
+                cos_a,
+                lim,
+            } => lanes(|l| {
+                let (rx, ry) = (x[l] - c0.x, y[l] - c0.y);
+                let (qx, qy) = (x[l] - c1.x, y[l] - c1.y);
+                let s = rx * d.x + ry * d.y;
+                let side = s * sin_a + (rx * n.x + ry * n.y).abs() * cos_a < lim;
+                let cap0 = rx * rx + ry * ry < r0sq;
+                let cap1 = qx * qx + qy * qy < r1sq;
+                if s < lo {
+                    cap0
+                } else if s > hi {
+                    cap1
+                } else {
+                    side
+                }
+            }),
+            Self::Ellipse { c, ea, eb, k2 } => lanes(|l| {
+                let (rx, ry) = (x[l] - c.x, y[l] - c.y);
+                let (xa, xb) = (rx * ea.x + ry * ea.y, rx * eb.x + ry * eb.y);
+                xa * xa + xb * xb < k2
+            }),
+        }
+    }
+}
+
 /// The parts that may hide analytic samples of one part: those whose bounding box overlaps
-/// the part's box (at most two), with their boxes. Unused slots hold an empty box, so the
-/// per-sample test is two unrolled box tests without a loop or a count.
+/// the part's box (at most two), with their boxes. Unused slots hold an empty box that no
+/// sample lies in.
 #[derive(Clone, Copy)]
 struct Occluders<'a> {
-    parts: [Option<&'a Prepared>; 2],
+    shapes: [&'a Inside; 2],
     boxes: [[f64; 4]; 2],
     /// Number of used slots.
     n: usize,
@@ -675,45 +905,146 @@ const EMPTY_BOX: [f64; 4] = [
 /// per-sample image test is kept: the samples lie on the outline up to rounding (~1e-12 px).
 const INSIDE_MARGIN: f64 = 1e-3;
 
-/// Analytic contour: calls `visit(u, v)` for points every `step` pixels along each part's
+/// What the sample loop does with a chunk of samples that passed the image and occluder tests
+/// (`ok` marks them).
+trait Sink {
+    fn take(&mut self, u: Lanes, v: Lanes, ok: [bool; LANES]);
+}
+
+/// Calls `visit` for every point that passed, in order.
+struct Visit<F>(F);
+
+impl<F: FnMut(f64, f64)> Sink for Visit<F> {
+    #[allow(clippy::inline_always)]
+    #[inline(always)]
+    fn take(&mut self, u: Lanes, v: Lanes, ok: [bool; LANES]) {
+        for l in 0..LANES {
+            if ok[l] {
+                (self.0)(u[l], v[l]);
+            }
+        }
+    }
+}
+
+/// Σ cost over the points that passed, one accumulator per lane, and their number. `cost` is
+/// evaluated on every lane (at (0, 0) for lanes that did not pass, whose result is dropped),
+/// so there is no branch per sample.
+struct Sum<'c, C> {
+    cost: &'c C,
+    sum: Lanes,
+    count: usize,
+}
+
+impl<C: Fn(f64, f64) -> f64> Sink for Sum<'_, C> {
+    #[allow(clippy::inline_always)]
+    #[inline(always)]
+    fn take(&mut self, u: Lanes, v: Lanes, ok: [bool; LANES]) {
+        let u = lanes(|l| if ok[l] { u[l] } else { 0.0 });
+        let v = lanes(|l| if ok[l] { v[l] } else { 0.0 });
+        for l in 0..LANES {
+            let c = (self.cost)(u[l], v[l]);
+            self.sum[l] += if ok[l] { c } else { 0.0 };
+        }
+        self.count += ok.iter().map(|&b| usize::from(b)).sum::<usize>();
+    }
+}
+
+/// The analytic sample loop over every part: points every `step` pixels along each part's
 /// outline that are not more than half a pixel inside another part and whose rounded pixel is
-/// inside the `width × height` image.
+/// inside the `width × height` image go to `sink`, in outline order.
 ///
 /// Per part, only the other parts whose bounding box overlaps this part's box can hide any of
-/// its samples, and a sample is tested against such a part only when it lies in that part's box
-/// (four comparisons), so most samples cost no inside test at all. A part whose box lies inside
+/// its samples, and the inside test against such a part runs only for chunks with a sample in
+/// that part's box, so most chunks cost no inside test at all. A part whose box lies inside
 /// the image skips the per-sample image test.
+#[allow(clippy::inline_always)]
+#[inline(always)]
+fn sample_parts<S: Sink>(parts: &Projected, width: u32, height: u32, step: f64, sink: &mut S) {
+    let (wf, hf) = (f64::from(width) - 0.5, f64::from(height) - 0.5);
+    let boxes = part_boxes(parts);
+    let mut shapes = [Inside::Never; 3];
+    for (s, part) in shapes.iter_mut().zip(parts.iter()) {
+        *s = Inside::new(part);
+    }
+    for (i, part) in parts.iter().enumerate() {
+        let Some((occ, inside)) = occluders(parts.n, &boxes, &shapes, i, wf, hf) else {
+            continue;
+        };
+        let (runs, nr) = part.sample_runs(step);
+        // Six copies of the sample loop: without and with the image test, for 0, 1 and 2
+        // occluders.
+        let r = &runs[..nr];
+        match (inside, occ.n) {
+            (true, 0) => sample_runs_into::<true, 0, S>(r, &occ, wf, hf, sink),
+            (true, 1) => sample_runs_into::<true, 1, S>(r, &occ, wf, hf, sink),
+            (true, _) => sample_runs_into::<true, 2, S>(r, &occ, wf, hf, sink),
+            (false, 0) => sample_runs_into::<false, 0, S>(r, &occ, wf, hf, sink),
+            (false, 1) => sample_runs_into::<false, 1, S>(r, &occ, wf, hf, sink),
+            (false, _) => sample_runs_into::<false, 2, S>(r, &occ, wf, hf, sink),
+        }
+    }
+}
+
+/// The sample loop of [`sample_parts`] for one part; `INSIDE`: the part's box is inside the
+/// image, so the image test is left out.
+#[allow(clippy::inline_always)]
+#[inline(always)]
+fn sample_runs_into<const INSIDE: bool, const NOCC: usize, S: Sink>(
+    runs: &[Run],
+    occ: &Occluders<'_>,
+    wf: f64,
+    hf: f64,
+    sink: &mut S,
+) {
+    for run in runs {
+        run.for_each_chunk(
+            #[inline(always)]
+            |u, v, ok| {
+                let mut ok = ok;
+                if !INSIDE {
+                    ok = lanes(|l| {
+                        ok[l] & (u[l] >= -0.5) & (v[l] >= -0.5) & (u[l] < wf) & (v[l] < hf)
+                    });
+                }
+                for (shape, ob) in occ.shapes.iter().zip(&occ.boxes).take(NOCC) {
+                    let inbox = lanes(|l| {
+                        ok[l]
+                            & (u[l] >= ob[0])
+                            & (u[l] <= ob[2])
+                            & (v[l] >= ob[1])
+                            & (v[l] <= ob[3])
+                    });
+                    if inbox.iter().any(|&b| b) {
+                        let deep = shape.deep(u, v);
+                        ok = lanes(|l| ok[l] & !(inbox[l] & deep[l]));
+                    }
+                }
+                sink.take(u, v, ok);
+            },
+        );
+    }
+}
+
+/// Analytic contour: calls `visit(u, v)` for points every `step` pixels along each part's
+/// outline that are not more than half a pixel inside another part and whose rounded pixel is
+/// inside the `width × height` image (the points that [`analytic_sum`] sums over, in the same
+/// order).
 pub(crate) fn analytic_contour<F: FnMut(f64, f64)>(
     parts: &Projected,
     width: u32,
     height: u32,
     step: f64,
-    mut visit: F,
+    visit: F,
 ) {
-    let (wf, hf) = (f64::from(width) - 0.5, f64::from(height) - 0.5);
-    let boxes = part_boxes(parts);
-    for (i, part) in parts.iter().enumerate() {
-        let Some((occ, inside)) = occluders(parts, &boxes, i, wf, hf) else {
-            continue;
-        };
-        let (runs, nr) = part.sample_runs(step);
-        for run in &runs[..nr] {
-            run.for_each(|x| {
-                if (inside || in_image(x, wf, hf)) && !occluded::<2>(x, &occ) {
-                    visit(x.x, x.y);
-                }
-            });
-        }
-    }
+    sample_parts(parts, width, height, step, &mut Visit(visit));
 }
 
-/// Σ cost(u, v) and the number of analytic contour samples (the points of
-/// [`analytic_contour`], in the same order), with one accumulator kept in a register: `cost`
-/// has no mutable state, and the loops over [`Run`]s have no nested closures.
-// Measured: with plain `#[inline]` LLVM keeps this out of line and the analytic likelihood is
-// ~12 % slower (perf example, same run).
-#[allow(clippy::inline_always)]
-#[inline(always)]
+/// Σ cost(u, v) over the analytic contour samples (the points of [`analytic_contour`]) and
+/// their number. `cost` must accept (0, 0) (it is also evaluated there, for lanes without a
+/// sample, and the result dropped). The loop is compiled twice, for baseline x86-64 and with
+/// AVX2, and the variant the CPU supports runs (pulp, no `unsafe` in our code); the four
+/// lanes are summed separately, so the order of the sum differs from the point order (by
+/// rounding only).
 pub(crate) fn analytic_sum<C: Fn(f64, f64) -> f64>(
     parts: &Projected,
     width: u32,
@@ -721,56 +1052,342 @@ pub(crate) fn analytic_sum<C: Fn(f64, f64) -> f64>(
     step: f64,
     cost: C,
 ) -> (f64, usize) {
-    let (wf, hf) = (f64::from(width) - 0.5, f64::from(height) - 0.5);
-    let boxes = part_boxes(parts);
-    let mut sum = 0.0f64;
-    let mut count = 0usize;
-    for (i, part) in parts.iter().enumerate() {
-        let Some((occ, inside)) = occluders(parts, &boxes, i, wf, hf) else {
-            continue;
-        };
-        let (runs, nr) = part.sample_runs(step);
-        // Six copies of the sample loop: without and with the image test, for 0, 1 and 2
-        // occluders.
-        let (r, c, s, n) = (&runs[..nr], &cost, &mut sum, &mut count);
-        match (inside, occ.n) {
-            (true, 0) => sum_runs::<true, 0, C>(r, &occ, wf, hf, c, s, n),
-            (true, 1) => sum_runs::<true, 1, C>(r, &occ, wf, hf, c, s, n),
-            (true, _) => sum_runs::<true, 2, C>(r, &occ, wf, hf, c, s, n),
-            (false, 0) => sum_runs::<false, 0, C>(r, &occ, wf, hf, c, s, n),
-            (false, 1) => sum_runs::<false, 1, C>(r, &occ, wf, hf, c, s, n),
-            (false, _) => sum_runs::<false, 2, C>(r, &occ, wf, hf, c, s, n),
-        }
-    }
-    (sum, count)
+    pulp::Arch::new().dispatch(SumOp {
+        parts,
+        width,
+        height,
+        step,
+        cost,
+    })
 }
 
-/// The sample loop of [`analytic_sum`] for one part; `INSIDE`: the part's box is inside the
-/// image, so the image test is left out. Adds to `sum` in sample order.
+/// [`analytic_sum`] as a [`pulp::WithSimd`] operation (see `edge.rs`: a closure's shim would
+/// not be inlined into the dispatched function, this is).
+struct SumOp<'p, C> {
+    parts: &'p Projected,
+    width: u32,
+    height: u32,
+    step: f64,
+    cost: C,
+}
+
+impl<C: Fn(f64, f64) -> f64> pulp::WithSimd for SumOp<'_, C> {
+    type Output = (f64, usize);
+
+    #[allow(clippy::inline_always)]
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) -> (f64, usize) {
+        let mut sink = Sum {
+            cost: &self.cost,
+            sum: [0.0; LANES],
+            count: 0,
+        };
+        sample_parts(self.parts, self.width, self.height, self.step, &mut sink);
+        let s = sink.sum;
+        ((s[0] + s[1]) + (s[2] + s[3]), sink.count)
+    }
+}
+
+/// The analytic sample loop of [`analytic_sum_nearest`] with explicit AVX2 vectors (pulp's
+/// `V3` token, no `unsafe` in our code): the same IEEE operations in the same order as the
+/// portable four-lane loop ([`sample_parts`]), so the same points pass, and the pixel index,
+/// the read of G and `(1 − G)²` of four samples at a time.
+#[cfg(target_arch = "x86_64")]
+mod avx2 {
+    use pulp::{Simd, f32x4, f64x4, m64x4, x86::V3};
+
+    use super::{Inside, LANES, Occluders, Projected, Run, occluders, part_boxes};
+
+    /// Whether any lane of `m` is set.
+    #[allow(clippy::inline_always)]
+    #[inline(always)]
+    fn any(m: m64x4) -> bool {
+        let a: [u64; LANES] = pulp::cast(m);
+        (a[0] | a[1] | a[2] | a[3]) != 0
+    }
+
+    /// `Σ (1 − G)²` over the analytic contour samples at their rounded pixels, and their number.
+    pub(super) struct Nearest<'a> {
+        pub simd: V3,
+        pub parts: &'a Projected,
+        pub width: u32,
+        pub height: u32,
+        pub step: f64,
+        pub data: &'a [f32],
+        pub stride: usize,
+    }
+
+    /// Accumulators and constants of the loop.
+    struct Acc<'a> {
+        simd: V3,
+        data: &'a [f32],
+        stride: f64x4,
+        sum: f64x4,
+        count: f64x4,
+    }
+
+    impl pulp::NullaryFnOnce for Nearest<'_> {
+        type Output = (f64, usize);
+
+        #[allow(clippy::inline_always)]
+        #[inline(always)]
+        fn call(self) -> (f64, usize) {
+            let s = self.simd;
+            let parts = self.parts;
+            let (wf, hf) = (f64::from(self.width) - 0.5, f64::from(self.height) - 0.5);
+            let boxes = part_boxes(parts);
+            let mut shapes = [Inside::Never; 3];
+            for (sh, part) in shapes.iter_mut().zip(parts.iter()) {
+                *sh = Inside::new(part);
+            }
+            let mut acc = Acc {
+                simd: s,
+                data: self.data,
+                stride: s.splat_f64s(self.stride as f64),
+                sum: s.splat_f64s(0.0),
+                count: s.splat_f64s(0.0),
+            };
+            for (i, part) in parts.iter().enumerate() {
+                let Some((occ, inside)) = occluders(parts.n, &boxes, &shapes, i, wf, hf) else {
+                    continue;
+                };
+                let (runs, nr) = part.sample_runs(self.step);
+                let (r, a) = (&runs[..nr], &mut acc);
+                match (inside, occ.n) {
+                    (true, 0) => runs_v3::<true, 0>(r, &occ, wf, hf, a),
+                    (true, 1) => runs_v3::<true, 1>(r, &occ, wf, hf, a),
+                    (true, _) => runs_v3::<true, 2>(r, &occ, wf, hf, a),
+                    (false, 0) => runs_v3::<false, 0>(r, &occ, wf, hf, a),
+                    (false, 1) => runs_v3::<false, 1>(r, &occ, wf, hf, a),
+                    (false, _) => runs_v3::<false, 2>(r, &occ, wf, hf, a),
+                }
+            }
+            let sum: [f64; LANES] = pulp::cast(acc.sum);
+            let count: [f64; LANES] = pulp::cast(acc.count);
+            (
+                (sum[0] + sum[1]) + (sum[2] + sum[3]),
+                ((count[0] + count[1]) + (count[2] + count[3])) as usize,
+            )
+        }
+    }
+
+    #[allow(clippy::inline_always)]
+    #[inline(always)]
+    fn runs_v3<const INSIDE: bool, const NOCC: usize>(
+        runs: &[Run],
+        occ: &Occluders<'_>,
+        wf: f64,
+        hf: f64,
+        acc: &mut Acc<'_>,
+    ) {
+        let s = acc.simd;
+        let four = s.splat_f64s(LANES as f64);
+        for run in runs {
+            match *run {
+                Run::Line { p, s: st, n } => {
+                    let nf = s.splat_f64s(n as f64);
+                    let (px, py) = (s.splat_f64s(p.x), s.splat_f64s(p.y));
+                    let (sx, sy) = (s.splat_f64s(st.x), s.splat_f64s(st.y));
+                    let mut k = f64x4(0.0, 1.0, 2.0, 3.0);
+                    for _ in 0..n.div_ceil(LANES) {
+                        let u = s.add_f64s(px, s.mul_f64s(k, sx));
+                        let v = s.add_f64s(py, s.mul_f64s(k, sy));
+                        chunk::<INSIDE, NOCC>(u, v, s.less_than_f64s(k, nf), occ, wf, hf, acc);
+                        k = s.add_f64s(k, four);
+                    }
+                }
+                Run::Trig {
+                    c,
+                    u,
+                    w,
+                    co,
+                    si,
+                    cl,
+                    sl,
+                    n,
+                } => {
+                    let nf = s.splat_f64s(n as f64);
+                    let (cx, cy) = (s.splat_f64s(c.x), s.splat_f64s(c.y));
+                    let (ux, uy) = (s.splat_f64s(u.x), s.splat_f64s(u.y));
+                    let (wx, wy) = (s.splat_f64s(w.x), s.splat_f64s(w.y));
+                    let (cl, sl) = (s.splat_f64s(cl), s.splat_f64s(sl));
+                    let mut co: f64x4 = pulp::cast(co);
+                    let mut si: f64x4 = pulp::cast(si);
+                    let mut k = f64x4(0.0, 1.0, 2.0, 3.0);
+                    for _ in 0..n.div_ceil(LANES) {
+                        let x = s.add_f64s(s.add_f64s(cx, s.mul_f64s(ux, co)), s.mul_f64s(wx, si));
+                        let y = s.add_f64s(s.add_f64s(cy, s.mul_f64s(uy, co)), s.mul_f64s(wy, si));
+                        chunk::<INSIDE, NOCC>(x, y, s.less_than_f64s(k, nf), occ, wf, hf, acc);
+                        (co, si) = (
+                            s.sub_f64s(s.mul_f64s(co, cl), s.mul_f64s(si, sl)),
+                            s.add_f64s(s.mul_f64s(si, cl), s.mul_f64s(co, sl)),
+                        );
+                        k = s.add_f64s(k, four);
+                    }
+                }
+            }
+        }
+    }
+
+    #[allow(clippy::inline_always, clippy::too_many_arguments)]
+    #[inline(always)]
+    fn chunk<const INSIDE: bool, const NOCC: usize>(
+        u: f64x4,
+        v: f64x4,
+        ok: m64x4,
+        occ: &Occluders<'_>,
+        wf: f64,
+        hf: f64,
+        acc: &mut Acc<'_>,
+    ) {
+        let s = acc.simd;
+        let mut ok = ok;
+        if !INSIDE {
+            let lo = s.splat_f64s(-0.5);
+            let a = s.and_m64s(
+                s.greater_than_or_equal_f64s(u, lo),
+                s.greater_than_or_equal_f64s(v, lo),
+            );
+            let b = s.and_m64s(
+                s.less_than_f64s(u, s.splat_f64s(wf)),
+                s.less_than_f64s(v, s.splat_f64s(hf)),
+            );
+            ok = s.and_m64s(ok, s.and_m64s(a, b));
+        }
+        for (shape, ob) in occ.shapes.iter().zip(&occ.boxes).take(NOCC) {
+            let a = s.and_m64s(
+                s.greater_than_or_equal_f64s(u, s.splat_f64s(ob[0])),
+                s.less_than_or_equal_f64s(u, s.splat_f64s(ob[2])),
+            );
+            let b = s.and_m64s(
+                s.greater_than_or_equal_f64s(v, s.splat_f64s(ob[1])),
+                s.less_than_or_equal_f64s(v, s.splat_f64s(ob[3])),
+            );
+            let inbox = s.and_m64s(ok, s.and_m64s(a, b));
+            if any(inbox) {
+                let deep = deep(s, shape, u, v);
+                ok = s.and_m64s(ok, s.not_m64s(s.and_m64s(inbox, deep)));
+            }
+        }
+        let zero = s.splat_f64s(0.0);
+        let half = s.splat_f64s(0.5);
+        let uu = s.select_f64s(ok, s.add_f64s(u, half), zero);
+        let vv = s.select_f64s(ok, s.add_f64s(v, half), zero);
+        // Lanes that passed have u + ½, v + ½ ∈ [0, 2³¹) (in the image): truncation is the
+        // rounded pixel, and the index is exact in f64.
+        let fi = s.add_f64s(
+            s.mul_f64s(s.truncate_f64x4(vv), acc.stride),
+            s.truncate_f64x4(uu),
+        );
+        let idx: [i32; LANES] = pulp::cast(s.convert_f64x4_to_i32x4(fi));
+        let d = acc.data;
+        let g = s.convert_f32x4_to_f64x4(f32x4(
+            d[idx[0] as usize],
+            d[idx[1] as usize],
+            d[idx[2] as usize],
+            d[idx[3] as usize],
+        ));
+        let e = s.sub_f64s(s.splat_f64s(1.0), g);
+        acc.sum = s.add_f64s(acc.sum, s.select_f64s(ok, s.mul_f64s(e, e), zero));
+        acc.count = s.add_f64s(acc.count, s.select_f64s(ok, s.splat_f64s(1.0), zero));
+    }
+
+    /// [`Inside::deep`] on four lanes.
+    #[allow(clippy::inline_always)]
+    #[inline(always)]
+    fn deep(s: V3, shape: &Inside, x: f64x4, y: f64x4) -> m64x4 {
+        let sp = |a: f64| s.splat_f64s(a);
+        let dot = |ax: f64x4, ay: f64x4, bx: f64, by: f64| {
+            s.add_f64s(s.mul_f64s(ax, sp(bx)), s.mul_f64s(ay, sp(by)))
+        };
+        let norm2 = |ax: f64x4, ay: f64x4| s.add_f64s(s.mul_f64s(ax, ax), s.mul_f64s(ay, ay));
+        match *shape {
+            Inside::Never => pulp::cast([0u64; LANES]),
+            Inside::Disc { c, r2 } => {
+                let (dx, dy) = (s.sub_f64s(x, sp(c.x)), s.sub_f64s(y, sp(c.y)));
+                s.less_than_f64s(norm2(dx, dy), sp(r2))
+            }
+            Inside::Capsule {
+                c0,
+                c1,
+                d,
+                n,
+                lo,
+                hi,
+                r0sq,
+                r1sq,
+                sin_a,
+                cos_a,
+                lim,
+            } => {
+                let (rx, ry) = (s.sub_f64s(x, sp(c0.x)), s.sub_f64s(y, sp(c0.y)));
+                let (qx, qy) = (s.sub_f64s(x, sp(c1.x)), s.sub_f64s(y, sp(c1.y)));
+                let sd = dot(rx, ry, d.x, d.y);
+                let side = s.less_than_f64s(
+                    s.add_f64s(
+                        s.mul_f64s(sd, sp(sin_a)),
+                        s.mul_f64s(s.abs_f64s(dot(rx, ry, n.x, n.y)), sp(cos_a)),
+                    ),
+                    sp(lim),
+                );
+                let cap0 = s.less_than_f64s(norm2(rx, ry), sp(r0sq));
+                let cap1 = s.less_than_f64s(norm2(qx, qy), sp(r1sq));
+                let below = s.less_than_f64s(sd, sp(lo));
+                let above = s.greater_than_f64s(sd, sp(hi));
+                let mid = s.and_m64s(s.not_m64s(above), side);
+                let upper = s.or_m64s(s.and_m64s(above, cap1), mid);
+                s.or_m64s(
+                    s.and_m64s(below, cap0),
+                    s.and_m64s(s.not_m64s(below), upper),
+                )
+            }
+            Inside::Ellipse { c, ea, eb, k2 } => {
+                let (rx, ry) = (s.sub_f64s(x, sp(c.x)), s.sub_f64s(y, sp(c.y)));
+                let (xa, xb) = (dot(rx, ry, ea.x, ea.y), dot(rx, ry, eb.x, eb.y));
+                s.less_than_f64s(norm2(xa, xb), sp(k2))
+            }
+        }
+    }
+}
+
+/// `Σ (1 − G(c))²` over the analytic contour samples `c` at their rounded pixels (`data`:
+/// G row-major with `stride` values per row; the image is at least `width × height`) and
+/// their number: the same points and values as `analytic_sum` with the nearest-pixel cost, with
+/// AVX2 when the CPU has it (the lanes are summed separately: the sum differs by rounding).
+pub(crate) fn analytic_sum_nearest(
+    parts: &Projected,
+    width: u32,
+    height: u32,
+    step: f64,
+    data: &[f32],
+    stride: usize,
+) -> (f64, usize) {
+    #[cfg(target_arch = "x86_64")]
+    if let Some(simd) = pulp::x86::V3::try_new() {
+        return simd.vectorize(avx2::Nearest {
+            simd,
+            parts,
+            width,
+            height,
+            step,
+            data,
+            stride,
+        });
+    }
+    analytic_sum(parts, width, height, step, nearest_cost(data, stride))
+}
+
+/// The nearest-pixel cost `(1 − G)²` at an analytic sample (whose rounded pixel is in the
+/// image, so u + ½, v + ½ ∈ [0, 2³¹): the cheap f64 → i32 conversion suffices), and at (0, 0).
 #[allow(clippy::inline_always)]
 #[inline(always)]
-fn sum_runs<const INSIDE: bool, const NOCC: usize, C: Fn(f64, f64) -> f64>(
-    runs: &[Run],
-    occ: &Occluders<'_>,
-    wf: f64,
-    hf: f64,
-    cost: &C,
-    sum: &mut f64,
-    count: &mut usize,
-) {
-    let (mut s, mut n) = (*sum, *count);
-    for run in runs {
-        run.for_each(
-            #[inline(always)]
-            |x| {
-                if (INSIDE || in_image(x, wf, hf)) && !occluded::<NOCC>(x, occ) {
-                    s += cost(x.x, x.y);
-                    n += 1;
-                }
-            },
-        );
+pub(crate) fn nearest_cost(data: &[f32], stride: usize) -> impl Fn(f64, f64) -> f64 + '_ {
+    #[inline(always)]
+    move |u: f64, v: f64| {
+        let i = (v + 0.5) as i32 as usize * stride + (u + 0.5) as i32 as usize;
+        let e = 1.0 - f64::from(data[i]);
+        e * e
     }
-    (*sum, *count) = (s, n);
 }
 
 /// Bounding boxes of the parts (unused slots zero).
@@ -782,11 +1399,12 @@ fn part_boxes(parts: &Projected) -> [[f64; 4]; 3] {
     boxes
 }
 
-/// The occluders of part `i` and whether its box lies inside the image, or `None` when the
-/// part is entirely outside the image.
+/// The occluders of part `i` (of `n`) and whether its box lies inside the image, or `None`
+/// when the part is entirely outside the image.
 fn occluders<'a>(
-    parts: &'a Projected,
+    n: usize,
     boxes: &[[f64; 4]; 3],
+    shapes: &'a [Inside; 3],
     i: usize,
     wf: f64,
     hf: f64,
@@ -800,48 +1418,19 @@ fn occluders<'a>(
     let overlap =
         |a: &[f64; 4], b: &[f64; 4]| a[0] <= b[2] && b[0] <= a[2] && a[1] <= b[3] && b[1] <= a[3];
     let mut out = Occluders {
-        parts: [None; 2],
+        shapes: [&Inside::Never; 2],
         boxes: [EMPTY_BOX; 2],
         n: 0,
     };
-    for (k, other) in parts.iter().enumerate() {
+    for k in 0..n.min(3) {
         if k != i && out.n < 2 && overlap(&bb, &boxes[k]) {
-            out.parts[out.n] = Some(other);
+            out.shapes[out.n] = &shapes[k];
             out.boxes[out.n] = boxes[k];
             out.n += 1;
         }
     }
     Some((out, inside))
 }
-
-/// Whether the rounded pixel of an analytic sample is in the image.
-#[allow(clippy::inline_always)]
-#[inline(always)]
-fn in_image(x: Vector2<f64>, wf: f64, hf: f64) -> bool {
-    x.x >= -0.5 && x.y >= -0.5 && x.x < wf && x.y < hf
-}
-
-/// Whether an analytic sample is deep inside one of the first `NOCC` occluders (tested only
-/// when it lies in the occluder's box).
-// Measured: with plain `#[inline]` LLVM keeps this out of line and the analytic likelihood is
-// ~12 % slower (perf example, same run).
-#[allow(clippy::inline_always)]
-#[inline(always)]
-fn occluded<const NOCC: usize>(x: Vector2<f64>, occ: &Occluders<'_>) -> bool {
-    for (other, ob) in occ.parts.iter().zip(&occ.boxes).take(NOCC) {
-        if x.x >= ob[0]
-            && x.x <= ob[2]
-            && x.y >= ob[1]
-            && x.y <= ob[3]
-            && let Some(other) = other
-            && other.deep_inside(x)
-        {
-            return true;
-        }
-    }
-    false
-}
-
 /// Raster contour: fills the union silhouette into the scratch mask (tight bounding box,
 /// non-zero winding, no anti-aliasing) and calls `visit(u, v)` for every pixel of the inner
 /// 4-neighbour boundary that lies inside the `width × height` image.
@@ -1120,8 +1709,9 @@ mod tests {
 
     #[test]
     fn sample_runs_are_the_outline_walk() {
-        // The runs of the likelihood's sampler give exactly (bit for bit, same order) the
-        // points of the reference outline walk, for every part kind and several spacings.
+        // The runs of the likelihood's sampler give the points of the reference outline walk
+        // (same number, same order, equal up to rounding), for every part kind and several
+        // spacings.
         let c = cam();
         let g = ArmGeometry::default();
         let mut parts: Vec<Prepared> = poses()
@@ -1137,6 +1727,13 @@ mod tests {
             r0: 5.0,
             r1: 2.0,
         }));
+        // Small radii: arcs with θ > ½ (libm sine and cosine instead of the polynomials).
+        parts.push(Prepared::new(&Part2::Capsule {
+            c0: [30.0, 20.0],
+            c1: [60.0, 35.0],
+            r0: 1.5,
+            r1: 0.7,
+        }));
         assert!(parts.iter().any(|p| matches!(p, Prepared::Circle { .. })));
         for part in &parts {
             for step in [0.7, 2.0, 3.3] {
@@ -1147,19 +1744,151 @@ mod tests {
                 for run in &r[..n] {
                     run.for_each(|x| runs.push(x));
                 }
-                assert_eq!(walk, runs);
+                assert_eq!(walk.len(), runs.len());
+                for (a, b) in walk.iter().zip(&runs) {
+                    assert!((a - b).norm() < 1e-9, "{a:?} vs {b:?}");
+                }
+                // Consecutive samples at most Δ apart (the arcs' chords and line steps).
+                for w in runs.windows(2) {
+                    assert!((w[1] - w[0]).norm() <= step + 1e-9);
+                }
             }
         }
     }
 
     #[test]
-    fn analytic_sum_visits_the_contour_points_in_order() {
-        // The specialised loops of `analytic_sum` (part inside / cut by the image border, 0–2
-        // occluders) give exactly the points of `analytic_contour`, in the same order, so the
-        // sums agree bit for bit. Cameras of several sizes cut parts at the border.
+    fn prepared_hand_axes_are_those_of_the_angle() {
+        // The half-angle axis directions of `project_prepared` equal cos/sin of the public
+        // `Part2::Ellipse::angle` (atan2), over hand orientations in every quadrant.
+        let c = cam();
+        let g = ArmGeometry::default();
+        let mut n = 0;
+        for k in 0..64 {
+            let t = f64::from(k) * std::f64::consts::TAU / 64.0;
+            let mut pose = [
+                0.2,
+                0.0,
+                1.2,
+                0.3,
+                0.1,
+                0.95,
+                0.3 + 0.25 * t.cos(),
+                0.1 + 0.25 * t.sin(),
+                0.95 + 0.1 * (2.0 * t).sin(),
+            ];
+            crate::correct_arm(&g, &mut pose, None);
+            let parts = project_prepared(&c, &g, &pose);
+            let public = project_parts(&c, &g, &pose);
+            let (
+                Some(Prepared::Ellipse {
+                    c: c1,
+                    a,
+                    b,
+                    ea,
+                    eb,
+                }),
+                Some(part),
+            ) = (parts.iter().last(), public.last())
+            else {
+                continue;
+            };
+            let Prepared::Ellipse {
+                c: c2,
+                a: a2,
+                b: b2,
+                ea: ea2,
+                eb: eb2,
+            } = Prepared::new(part)
+            else {
+                panic!("not an ellipse");
+            };
+            assert_eq!((c1, a, b), (&c2, &a2, &b2));
+            assert!(
+                (ea - ea2).norm() < 1e-12 && (eb - eb2).norm() < 1e-12,
+                "{ea:?} {ea2:?}"
+            );
+            n += 1;
+        }
+        assert!(n > 50);
+    }
+
+    #[test]
+    fn four_lane_inside_test_is_the_scalar_one() {
+        // `Inside::deep` agrees with the scalar `deep_inside` except within rounding of the
+        // boundary (it multiplies by 1/a, 1/b where the scalar test divides).
+        let c = cam();
+        let g = ArmGeometry::default();
+        let mut checked = 0;
+        for pose in poses() {
+            let parts = project_prepared(&c, &g, &pose);
+            for part in parts.iter() {
+                let shape = Inside::new(part);
+                let bb = part.bbox();
+                for j in 0..40 {
+                    for i in 0..10 {
+                        let y = bb[1] - 3.0 + (bb[3] - bb[1] + 6.0) * f64::from(j) / 39.0;
+                        let x: Lanes = lanes(|l| {
+                            bb[0] - 3.0 + (bb[2] - bb[0] + 6.0) * (4 * i + l) as f64 / 39.0
+                        });
+                        let deep = shape.deep(x, [y; LANES]);
+                        for l in 0..LANES {
+                            let p = Vector2::new(x[l], y);
+                            let margin = part.signed_distance(p) + INSIDE_TOL;
+                            if margin.abs() > 1e-6 {
+                                assert_eq!(deep[l], part.deep_inside(p), "{p:?}");
+                                checked += 1;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        assert!(checked > 10_000);
+    }
+
+    #[test]
+    fn analytic_sums_are_over_the_contour_points() {
+        // The specialised loops of the sampler (part inside / cut by the image border, 0–2
+        // occluders), portable and AVX2, give exactly the points of `analytic_contour`: the
+        // same number, and the sums agree with the sum over the points in order to rounding.
+        // Cameras of several sizes cut parts at the border.
         let g = ArmGeometry::default();
         let mut occluder_counts = [0usize; 3];
         let mut cut = 0;
+        let check = |parts: &Projected, w: u32, h: u32| {
+            let cost = |u: f64, v: f64| (u * 0.37 + v * 1.3).sin();
+            let (mut sum, mut count) = (0.0, 0usize);
+            analytic_contour(parts, w, h, 2.0, |u, v| {
+                sum += cost(u, v);
+                count += 1;
+            });
+            let (s2, n2) = analytic_sum(parts, w, h, 2.0, cost);
+            assert_eq!(count, n2);
+            assert!((sum - s2).abs() < 1e-12 * count as f64, "{sum} vs {s2}");
+            // Nearest-pixel (1 − G)² on a synthetic G, dispatched (AVX2 here when available).
+            let data: Vec<f32> = (0..w as usize * h as usize)
+                .map(|i| ((i * 37) % 101) as f32 / 100.0)
+                .collect();
+            let c = nearest_cost(&data, w as usize);
+            let (mut sum, mut count) = (0.0, 0usize);
+            analytic_contour(parts, w, h, 2.0, |u, v| {
+                sum += c(u, v);
+                count += 1;
+            });
+            let (s3, n3) = analytic_sum_nearest(parts, w, h, 2.0, &data, w as usize);
+            assert_eq!(count, n3);
+            assert!((sum - s3).abs() < 1e-12 * count as f64, "{sum} vs {s3}");
+            let (s4, n4) = analytic_sum(parts, w, h, 2.0, &c);
+            assert_eq!((s4.to_bits(), n4), (s3.to_bits(), n3));
+            count
+        };
+        let shapes_of = |parts: &Projected| {
+            let mut shapes = [Inside::Never; 3];
+            for (s, p) in shapes.iter_mut().zip(parts.iter()) {
+                *s = Inside::new(p);
+            }
+            shapes
+        };
         for (w, h) in [(640, 480), (200, 150), (90, 300)] {
             let c = Camera::look_at(
                 Vector3::new(0.1, -1.6, 1.5),
@@ -1176,25 +1905,15 @@ mod tests {
             for pose in poses().into_iter().chain([straight]) {
                 let parts = project_prepared(&c, &g, &pose);
                 let boxes = part_boxes(&parts);
+                let shapes = shapes_of(&parts);
                 let (wf, hf) = (f64::from(w) - 0.5, f64::from(h) - 0.5);
                 for i in 0..parts.n {
-                    if let Some((occ, inside)) = occluders(&parts, &boxes, i, wf, hf) {
+                    if let Some((occ, inside)) = occluders(parts.n, &boxes, &shapes, i, wf, hf) {
                         occluder_counts[occ.n] += 1;
                         cut += usize::from(!inside);
                     }
                 }
-                let cost = |u: f64, v: f64| (u * 0.37 + v * 1.3).sin();
-                let (mut sum, mut count) = (0.0, 0usize);
-                analytic_contour(&parts, w, h, 2.0, |u, v| {
-                    sum += cost(u, v);
-                    count += 1;
-                });
-                let (s2, n2) = analytic_sum(&parts, w, h, 2.0, cost);
-                assert_eq!(
-                    (sum.to_bits(), count),
-                    (s2.to_bits(), n2),
-                    "{w}×{h} {pose:?}"
-                );
+                check(&parts, w, h);
             }
         }
         // Separated parts (no occluders), one of them cut by the border.
@@ -1222,20 +1941,13 @@ mod tests {
             apart.push(Prepared::new(&part));
         }
         let boxes = part_boxes(&apart);
+        let shapes = shapes_of(&apart);
         for i in 0..apart.n {
-            let (occ, inside) = occluders(&apart, &boxes, i, 639.5, 479.5).unwrap();
+            let (occ, inside) = occluders(apart.n, &boxes, &shapes, i, 639.5, 479.5).unwrap();
             occluder_counts[occ.n] += 1;
             cut += usize::from(!inside);
         }
-        let cost = |u: f64, v: f64| (u * 0.37 + v * 1.3).sin();
-        let (mut sum, mut count) = (0.0, 0usize);
-        analytic_contour(&apart, 640, 480, 2.0, |u, v| {
-            sum += cost(u, v);
-            count += 1;
-        });
-        let (s2, n2) = analytic_sum(&apart, 640, 480, 2.0, cost);
-        assert_eq!((sum.to_bits(), count), (s2.to_bits(), n2));
-        assert!(count > 100);
+        assert!(check(&apart, 640, 480) > 100);
         assert!(
             occluder_counts.iter().all(|&n| n > 0),
             "{occluder_counts:?}"

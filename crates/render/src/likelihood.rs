@@ -6,7 +6,9 @@ use rayon::prelude::*;
 
 use crate::{
     ArmGeometry, Camera, ContourMethod, EdgeImage, RenderError,
-    contour::{RenderScratch, analytic_sum, project_prepared, raster_contour},
+    contour::{
+        RenderScratch, analytic_sum, analytic_sum_nearest, project_prepared, raster_contour,
+    },
 };
 
 /// How G is read at an analytic contour point (raster contour points are whole pixels).
@@ -178,13 +180,9 @@ impl LikelihoodModel {
                 let data = edge.data();
                 let stride = edge.width() as usize;
                 (sum, count) = match self.sampling {
-                    SamplingMode::Nearest => analytic_sum(&parts, w, h, self.spacing, |u, v| {
-                        // The sampler guarantees the rounded pixel is in the image, so
-                        // u + ½, v + ½ ∈ [0, 2³¹): the cheap f64 → i32 conversion suffices.
-                        let i = (v + 0.5) as i32 as usize * stride + (u + 0.5) as i32 as usize;
-                        let e = 1.0 - f64::from(data[i]);
-                        e * e
-                    }),
+                    SamplingMode::Nearest => {
+                        analytic_sum_nearest(&parts, w, h, self.spacing, data, stride)
+                    }
                     SamplingMode::Bilinear => analytic_sum(&parts, w, h, self.spacing, |u, v| {
                         let g = edge.sample_bilinear(u, v).unwrap_or(0.0);
                         let e = 1.0 - f64::from(g);
