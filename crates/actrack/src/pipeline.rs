@@ -76,9 +76,15 @@ pub fn render_arm(scene: &Scene, lengths: [f64; 2]) -> RenderArm {
 /// Edge-image parameters for a frame width: SPEC §4.1 (σ_G = 4 px at 640 px, scaled).
 pub fn edge_params(width: u32) -> EdgeParams {
     EdgeParams {
-        sigma: (4.0 * f64::from(width) / 640.0).clamp(1.0, 8.0) as f32,
+        sigma: default_edge_sigma(width),
         ..EdgeParams::default()
     }
+}
+
+/// σ_G of SPEC §4.1 for an image `width` pixels wide: 4 px at 640, scaled with the width and
+/// clamped to [1, 8] px.
+pub fn default_edge_sigma(width: u32) -> f32 {
+    (4.0 * f64::from(width) / 640.0).clamp(1.0, 8.0) as f32
 }
 
 /// The observation model of one frame.
@@ -298,7 +304,7 @@ impl Pipeline {
             let view = ImageView::rgb8(img.as_raw(), img.width(), img.height())
                 .map_err(|e| Error::Config(format!("frame {frame}: {e}")))?;
             self.workspaces[v]
-                .compute_into(view, &edge_params(cam.width), &mut self.edges[v])
+                .compute_into(view, &self.scene.edge_params(cam.width), &mut self.edges[v])
                 .map_err(|e| Error::Config(format!("frame {frame}: {e}")))?;
         }
         let obs = SceneObservation {
