@@ -349,9 +349,19 @@ enum Run {
         s: Vector2<f64>,
         n: usize,
     },
-    /// `n` points `c + u·cos kθ + w·sin kθ`, k = 0 … n−1. `co`, `si`: cos and sin of kθ in
-    /// the lanes of the first chunk (k = 0 … 3); `cl`, `sl`: cos and sin of 4θ, the rotation
-    /// from one chunk to the next.
+    /// `n` points `c + r_k` on a circle, `r_k` = `r_0` rotated clockwise by kθ. `rx`, `ry`:
+    /// r_k in the lanes of the first chunk (k = 0 … 3); `cl`, `sl`: cos and sin of 4θ, the
+    /// rotation from one chunk to the next.
+    Arc {
+        c: Vector2<f64>,
+        rx: Lanes,
+        ry: Lanes,
+        cl: f64,
+        sl: f64,
+        n: usize,
+    },
+    /// `n` points `c + u·cos kθ + w·sin kθ`, k = 0 … n−1 (the ellipse). `co`, `si`: cos and
+    /// sin of kθ in the lanes of the first chunk (k = 0 … 3); `cl`, `sl`: cos and sin of 4θ.
     Trig {
         c: Vector2<f64>,
         u: Vector2<f64>,
@@ -394,13 +404,32 @@ impl Run {
     /// A clockwise arc (u right, v down: decreasing angle) of radius `r` around `c` from the
     /// unit direction `from`, `n` points `θ = sweep / n` apart, the end point excluded.
     fn arc(c: Vector2<f64>, r: f64, from: Vector2<f64>, sweep: f64, n: usize) -> Self {
-        Self::trig(
+        let Self::Trig {
+            u,
+            w,
+            co,
+            si,
+            cl,
+            sl,
+            ..
+        } = Self::trig(
             c,
             from * r,
             Vector2::new(from.y, -from.x) * r,
             sweep / n as f64,
             n,
         )
+        else {
+            unreachable!("trig gives a Trig run")
+        };
+        Self::Arc {
+            c,
+            rx: lanes(|l| u.x * co[l] + w.x * si[l]),
+            ry: lanes(|l| u.y * co[l] + w.y * si[l]),
+            cl,
+            sl,
+            n,
+        }
     }
 
     /// Calls `f(u, v, ok)` for every chunk of [`LANES`] points; `ok` marks the lanes that hold
@@ -410,17 +439,45 @@ impl Run {
     #[allow(clippy::inline_always)]
     #[inline(always)]
     fn for_each_chunk<F: FnMut(Lanes, Lanes, [bool; LANES])>(self, mut f: F) {
+        // Full chunks, then the tail (lanes l < n mod 4).
+        let (full, tail) = (self.len() / LANES, self.len() % LANES);
+        let tail_ok = lanes(|l| l < tail);
+        let step = LANES as f64;
         match self {
-            Self::Line { p, s, n } => {
-                let nf = n as f64;
+            Self::Line { p, s, .. } => {
                 let mut k = LANE_INDEX;
-                for _ in 0..n.div_ceil(LANES) {
+                let mut chunk = |k: &Lanes, ok| {
+                    f(lanes(|l| p.x + k[l] * s.x), lanes(|l| p.y + k[l] * s.y), ok);
+                };
+                for _ in 0..full {
+                    chunk(&k, [true; LANES]);
+                    k = lanes(|l| k[l] + step);
+                }
+                if tail > 0 {
+                    chunk(&k, tail_ok);
+                }
+            }
+            Self::Arc {
+                c,
+                mut rx,
+                mut ry,
+                cl,
+                sl,
+                ..
+            } => {
+                for _ in 0..full {
                     f(
-                        lanes(|l| p.x + k[l] * s.x),
-                        lanes(|l| p.y + k[l] * s.y),
-                        lanes(|l| k[l] < nf),
+                        lanes(|l| c.x + rx[l]),
+                        lanes(|l| c.y + ry[l]),
+                        [true; LANES],
                     );
-                    k = lanes(|l| k[l] + LANES as f64);
+                    (rx, ry) = (
+                        lanes(|l| cl * rx[l] + sl * ry[l]),
+                        lanes(|l| cl * ry[l] - sl * rx[l]),
+                    );
+                }
+                if tail > 0 {
+                    f(lanes(|l| c.x + rx[l]), lanes(|l| c.y + ry[l]), tail_ok);
                 }
             }
             Self::Trig {
@@ -431,23 +488,27 @@ impl Run {
                 mut si,
                 cl,
                 sl,
-                n,
+                ..
             } => {
-                let nf = n as f64;
-                let mut k = LANE_INDEX;
-                for _ in 0..n.div_ceil(LANES) {
+                for k in 0..full + usize::from(tail > 0) {
                     f(
                         lanes(|l| c.x + u.x * co[l] + w.x * si[l]),
                         lanes(|l| c.y + u.y * co[l] + w.y * si[l]),
-                        lanes(|l| k[l] < nf),
+                        if k < full { [true; LANES] } else { tail_ok },
                     );
                     (co, si) = (
                         lanes(|l| co[l] * cl - si[l] * sl),
                         lanes(|l| si[l] * cl + co[l] * sl),
                     );
-                    k = lanes(|l| k[l] + LANES as f64);
                 }
             }
+        }
+    }
+
+    /// The number of points of the run.
+    fn len(&self) -> usize {
+        match *self {
+            Self::Line { n, .. } | Self::Arc { n, .. } | Self::Trig { n, .. } => n,
         }
     }
 
@@ -638,9 +699,11 @@ fn project_ellipsoid_prepared(
 ) -> Option<Prepared> {
     let (c, a, b, [s00, s01, s11]) = ellipse_shape(cam, centre, axes)?;
     // (cos 2φ, sin 2φ) ∝ (s00 − s11, 2 s01), φ ∈ [−π/2, π/2] as `0.5·atan2`; the larger of
-    // cos φ, |sin φ| by a square root, the other from sin 2φ = 2 sin φ cos φ.
+    // cos φ, |sin φ| by a square root, the other from sin 2φ = 2 sin φ cos φ. The norm of
+    // (c2, s2) is 2·dev = a² − b² (no `hypot`: |s_ij| < 1e12 px², the squares cannot overflow).
     let (c2, s2) = (s00 - s11, 2.0 * s01);
-    let h = c2.hypot(s2);
+    #[allow(clippy::imprecise_flops)] // `hypot` is a libm call, and no accuracy is lost here.
+    let h = (c2 * c2 + s2 * s2).sqrt();
     let ea = if h > 0.0 {
         let (c2, s2) = (c2 / h, s2 / h);
         if c2 >= 0.0 {
@@ -931,7 +994,7 @@ impl<F: FnMut(f64, f64)> Sink for Visit<F> {
 /// so there is no branch per sample.
 struct Sum<'c, C> {
     cost: &'c C,
-    sum: Lanes,
+    acc: Lanes,
     count: usize,
 }
 
@@ -943,7 +1006,7 @@ impl<C: Fn(f64, f64) -> f64> Sink for Sum<'_, C> {
         let v = lanes(|l| if ok[l] { v[l] } else { 0.0 });
         for l in 0..LANES {
             let c = (self.cost)(u[l], v[l]);
-            self.sum[l] += if ok[l] { c } else { 0.0 };
+            self.acc[l] += if ok[l] { c } else { 0.0 };
         }
         self.count += ok.iter().map(|&b| usize::from(b)).sum::<usize>();
     }
@@ -987,7 +1050,8 @@ fn sample_parts<S: Sink>(parts: &Projected, width: u32, height: u32, step: f64, 
 
 /// The sample loop of [`sample_parts`] for one part; `INSIDE`: the part's box is inside the
 /// image, so the image test is left out.
-#[allow(clippy::inline_always)]
+// `&` on the lanes' booleans: branch-free, so LLVM can keep the four lanes together.
+#[allow(clippy::inline_always, clippy::needless_bitwise_bool)]
 #[inline(always)]
 fn sample_runs_into<const INSIDE: bool, const NOCC: usize, S: Sink>(
     runs: &[Run],
@@ -1079,11 +1143,11 @@ impl<C: Fn(f64, f64) -> f64> pulp::WithSimd for SumOp<'_, C> {
     fn with_simd<S: pulp::Simd>(self, _simd: S) -> (f64, usize) {
         let mut sink = Sum {
             cost: &self.cost,
-            sum: [0.0; LANES],
+            acc: [0.0; LANES],
             count: 0,
         };
         sample_parts(self.parts, self.width, self.height, self.step, &mut sink);
-        let s = sink.sum;
+        let s = sink.acc;
         ((s[0] + s[1]) + (s[2] + s[3]), sink.count)
     }
 }
@@ -1182,18 +1246,53 @@ mod avx2 {
     ) {
         let s = acc.simd;
         let four = s.splat_f64s(LANES as f64);
+        let all: m64x4 = pulp::cast([u64::MAX; LANES]);
         for run in runs {
+            let (full, tail) = (run.len() / LANES, run.len() % LANES);
+            let tail_ok: m64x4 =
+                pulp::cast([0, 1, 2, 3].map(|l| if l < tail { u64::MAX } else { 0 }));
             match *run {
-                Run::Line { p, s: st, n } => {
-                    let nf = s.splat_f64s(n as f64);
+                Run::Line { p, s: st, .. } => {
                     let (px, py) = (s.splat_f64s(p.x), s.splat_f64s(p.y));
                     let (sx, sy) = (s.splat_f64s(st.x), s.splat_f64s(st.y));
                     let mut k = f64x4(0.0, 1.0, 2.0, 3.0);
-                    for _ in 0..n.div_ceil(LANES) {
+                    for _ in 0..full {
                         let u = s.add_f64s(px, s.mul_f64s(k, sx));
                         let v = s.add_f64s(py, s.mul_f64s(k, sy));
-                        chunk::<INSIDE, NOCC>(u, v, s.less_than_f64s(k, nf), occ, wf, hf, acc);
+                        chunk::<INSIDE, NOCC>(u, v, all, occ, wf, hf, acc);
                         k = s.add_f64s(k, four);
+                    }
+                    if tail > 0 {
+                        let u = s.add_f64s(px, s.mul_f64s(k, sx));
+                        let v = s.add_f64s(py, s.mul_f64s(k, sy));
+                        chunk::<INSIDE, NOCC>(u, v, tail_ok, occ, wf, hf, acc);
+                    }
+                }
+                Run::Arc {
+                    c, rx, ry, cl, sl, ..
+                } => {
+                    let (cx, cy) = (s.splat_f64s(c.x), s.splat_f64s(c.y));
+                    let (cl, sl) = (s.splat_f64s(cl), s.splat_f64s(sl));
+                    let mut rx: f64x4 = pulp::cast(rx);
+                    let mut ry: f64x4 = pulp::cast(ry);
+                    for _ in 0..full {
+                        chunk::<INSIDE, NOCC>(
+                            s.add_f64s(cx, rx),
+                            s.add_f64s(cy, ry),
+                            all,
+                            occ,
+                            wf,
+                            hf,
+                            acc,
+                        );
+                        (rx, ry) = (
+                            s.add_f64s(s.mul_f64s(cl, rx), s.mul_f64s(sl, ry)),
+                            s.sub_f64s(s.mul_f64s(cl, ry), s.mul_f64s(sl, rx)),
+                        );
+                    }
+                    if tail > 0 {
+                        let (u, v) = (s.add_f64s(cx, rx), s.add_f64s(cy, ry));
+                        chunk::<INSIDE, NOCC>(u, v, tail_ok, occ, wf, hf, acc);
                     }
                 }
                 Run::Trig {
@@ -1204,25 +1303,23 @@ mod avx2 {
                     si,
                     cl,
                     sl,
-                    n,
+                    ..
                 } => {
-                    let nf = s.splat_f64s(n as f64);
                     let (cx, cy) = (s.splat_f64s(c.x), s.splat_f64s(c.y));
                     let (ux, uy) = (s.splat_f64s(u.x), s.splat_f64s(u.y));
                     let (wx, wy) = (s.splat_f64s(w.x), s.splat_f64s(w.y));
                     let (cl, sl) = (s.splat_f64s(cl), s.splat_f64s(sl));
                     let mut co: f64x4 = pulp::cast(co);
                     let mut si: f64x4 = pulp::cast(si);
-                    let mut k = f64x4(0.0, 1.0, 2.0, 3.0);
-                    for _ in 0..n.div_ceil(LANES) {
+                    for k in 0..full + usize::from(tail > 0) {
                         let x = s.add_f64s(s.add_f64s(cx, s.mul_f64s(ux, co)), s.mul_f64s(wx, si));
                         let y = s.add_f64s(s.add_f64s(cy, s.mul_f64s(uy, co)), s.mul_f64s(wy, si));
-                        chunk::<INSIDE, NOCC>(x, y, s.less_than_f64s(k, nf), occ, wf, hf, acc);
+                        let ok = if k < full { all } else { tail_ok };
+                        chunk::<INSIDE, NOCC>(x, y, ok, occ, wf, hf, acc);
                         (co, si) = (
                             s.sub_f64s(s.mul_f64s(co, cl), s.mul_f64s(si, sl)),
                             s.add_f64s(s.mul_f64s(si, cl), s.mul_f64s(co, sl)),
                         );
-                        k = s.add_f64s(k, four);
                     }
                 }
             }
