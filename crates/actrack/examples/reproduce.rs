@@ -255,8 +255,16 @@ fn write_docs(
             r.wall_seconds
         );
     }
-    md.push_str("\n<!-- analysis -->\n");
-    std::fs::write(a.docs.join("results.md"), md)?;
+    // Everything after the marker is written by hand: keep it across regenerations.
+    const MARKER: &str = "\n<!-- analysis -->\n";
+    md.push_str(MARKER);
+    let path = a.docs.join("results.md");
+    if let Ok(old) = std::fs::read_to_string(&path)
+        && let Some(i) = old.find(MARKER)
+    {
+        md.push_str(&old[i + MARKER.len()..]);
+    }
+    std::fs::write(&path, md)?;
     eprintln!(
         "wrote {} in {total:.0} s",
         a.docs.join("results.md").display()
