@@ -141,6 +141,9 @@ pub struct TrackOptions {
     /// Where each action's θ prior lives: its own training targets (default) or the scene's
     /// table region.
     pub theta_prior: ThetaPrior,
+    /// Per-particle speed range (`TrackerConfigBuilder::speed_range`); `None`: the models'
+    /// timing.
+    pub speed_range: Option<[f64; 2]>,
 }
 
 impl Default for TrackOptions {
@@ -150,6 +153,7 @@ impl Default for TrackOptions {
             seed: 0,
             contour: ContourMethod::Raster,
             theta_prior: ThetaPrior::Training,
+            speed_range: None,
         }
     }
 }
@@ -241,7 +245,8 @@ impl Pipeline {
         let (centre, half) = scene.theta_region();
         let mut builder = TrackerConfig::builder(TableRegion::new(centre, half))
             .particles(opts.particles)
-            .seed(opts.seed);
+            .seed(opts.seed)
+            .speed_range(opts.speed_range);
         if opts.theta_prior == ThetaPrior::Training {
             builder = builder.action_regions(training_theta_regions(
                 model,

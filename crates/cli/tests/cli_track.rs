@@ -273,6 +273,18 @@ fn bad_input_names_the_frame_with_exit_code_2() {
                 .count()
                 == 5
     );
+    // A bad speed range is a usage error.
+    for bad in ["2,1", "0.8", "a,1"] {
+        expect_input_error(
+            &track(
+                &f.root,
+                "video/frames",
+                &["--csv", "x.csv", "--speed-range", bad],
+                None,
+            ),
+            &["--speed-range"],
+        );
+    }
     // Empty directory.
     std::fs::create_dir_all(f.root.join("empty")).unwrap();
     expect_input_error(

@@ -151,6 +151,8 @@ pub struct TrackerConfig {
     pub(crate) action_balance: ActionBalance,
     pub(crate) pose_sampling: PoseSampling,
     pub(crate) action_regions: Option<Vec<TableRegion>>,
+    #[serde(default)]
+    pub(crate) speed_range: Option<[f64; 2]>,
     pub(crate) median_window: usize,
     pub(crate) seed: u64,
 }
@@ -175,6 +177,7 @@ impl TrackerConfig {
                 action_balance: ActionBalance::Mixture(DEFAULT_ACTION_FLOOR),
                 pose_sampling: PoseSampling::Gaussian { samples: 1 },
                 action_regions: None,
+                speed_range: None,
                 median_window: 5,
                 seed: 0,
             },
@@ -242,6 +245,10 @@ impl TrackerConfig {
     /// Per-action θ supports (metres, actor frame), if set.
     pub fn action_regions(&self) -> Option<&[TableRegion]> {
         self.action_regions.as_deref()
+    }
+    /// The range of per-particle speeds, if set.
+    pub fn speed_range(&self) -> Option<[f64; 2]> {
+        self.speed_range
     }
     /// Window of the causal median filter of the best pose, frames.
     pub fn median_window(&self) -> usize {
@@ -349,6 +356,18 @@ impl TrackerConfigBuilder {
         self.config.action_regions = Some(regions);
         self
     }
+    /// Per-particle speeds (not in the SPEC; default none, i.e. every particle follows the
+    /// model's timing). With `Some([lo, hi])` every particle draws a speed s log-uniformly from
+    /// [lo, hi] when it starts an action instance (at initialisation and on re-entry through the
+    /// grammar) and keeps it for the instance; each frame it then takes ⌊s⌋ transition draws
+    /// from its state's row, plus one more with probability s − ⌊s⌋. People move at different
+    /// speeds, and the HMM's geometric dwell times alone let particles keep a persistent
+    /// faster or slower pace only by chance.
+    #[must_use]
+    pub fn speed_range(mut self, range: Option<[f64; 2]>) -> Self {
+        self.config.speed_range = range;
+        self
+    }
     /// Window of the causal median filter, frames (≥ 1; default 5; 1 disables smoothing).
     #[must_use]
     pub fn median_window(mut self, window: usize) -> Self {
@@ -422,6 +441,13 @@ impl TrackerConfigBuilder {
             && samples == 0
         {
             return bad("samples per particle must be at least 1".into());
+        }
+        if let Some([lo, hi]) = c.speed_range
+            && !(lo.is_finite() && hi.is_finite() && lo > 0.0 && lo <= hi && hi <= 4.0)
+        {
+            return bad(format!(
+                "the speed range needs 0 < lo ≤ hi ≤ 4 (1 = the model's timing), got [{lo}, {hi}]"
+            ));
         }
         if c.median_window == 0 {
             return bad("the median-filter window must be at least 1 frame (default 5)".into());

@@ -70,6 +70,15 @@ impl Kernel<'_> {
         }
     }
 
+    /// A speed for a new action instance: log-uniform over the configured range (1 without).
+    #[inline]
+    fn draw_speed<R: Rng + ?Sized>(&self, rng: &mut R) -> f64 {
+        match self.config.speed_range {
+            None => 1.0,
+            Some([lo, hi]) => (lo.ln() + (hi / lo).ln() * rng.random::<f64>()).exp(),
+        }
+    }
+
     /// SPEC §3.2: a ~ U(𝒜), θ ~ U(R), k ~ π_a (or uniform).
     fn init<R: Rng + ?Sized>(&self, rng: &mut R) -> ActionState {
         let action = rng.random_range(0..self.models.len());
@@ -83,9 +92,34 @@ impl Kernel<'_> {
     }
 
     /// SPEC §3.3: timing, grammar on exit, θ diffusion with the cooling schedule at k'.
-    fn propagate<R: Rng + ?Sized>(&self, s: &mut ActionState, rng: &mut R) {
+    fn propagate<R: Rng + ?Sized>(&self, s: &mut ActionState, speed: &mut f64, rng: &mut R) {
+        if self.config.speed_range.is_none() {
+            self.transition(s, rng);
+        } else {
+            let whole = speed.floor();
+            let mut n = whole as usize;
+            if rng.random::<f64>() < *speed - whole {
+                n += 1;
+            }
+            for _ in 0..n {
+                if self.transition(s, rng) {
+                    *speed = self.draw_speed(rng);
+                    break;
+                }
+            }
+        }
+        let sigma = self.models[s.action].sigma(s.k);
+        self.diffuse_theta(s, sigma, rng);
+    }
+
+    /// One draw from the transition row (SPEC §3.3 steps 1–2); true when the particle left its
+    /// action and started a new instance.
+    fn transition<R: Rng + ?Sized>(&self, s: &mut ActionState, rng: &mut R) -> bool {
         match self.models[s.action].next(s.k, rng) {
-            Next::State(k) => s.k = k,
+            Next::State(k) => {
+                s.k = k;
+                false
+            }
             Next::Exit => {
                 let n_actions = self.models.len();
                 s.action = match self.grammar {
@@ -99,10 +133,15 @@ impl Kernel<'_> {
                 };
                 s.k = self.models[s.action].draw_start(rng);
                 s.theta = self.draw_theta(s.action, rng);
+                true
             }
         }
+    }
+
+    /// θ' = θ + σ ε with the boundary handling of SPEC §3.3 (per-action support if set).
+    #[inline]
+    fn diffuse_theta<R: Rng + ?Sized>(&self, s: &mut ActionState, sigma: f64, rng: &mut R) {
         let c = self.config;
-        let sigma = self.models[s.action].sigma(s.k);
         let support = self.boxes.map(|b| b[s.action]);
         for (i, t) in s.theta.iter_mut().enumerate() {
             let e: f64 = rng.sample(rand_distr::StandardNormal);
@@ -138,6 +177,12 @@ impl Kernel<'_> {
         }
     }
 }
+
+/// One particle's slots in the per-frame loop: index, (state, speed), poses.
+type ParticleItem<'x> = (
+    usize,
+    ((&'x mut ActionState, &'x mut f64), &'x mut [[f64; D]]),
+);
 
 /// Buffers of the mixture resampler (reused every frame).
 #[derive(Debug, Clone, Default)]
@@ -200,6 +245,9 @@ pub struct Tracker {
     frame: usize,
     states: Vec<ActionState>,
     next_states: Vec<ActionState>,
+    /// Per-particle speeds (all 1 without [`TrackerConfig::speed_range`]).
+    speeds: Vec<f64>,
+    next_speeds: Vec<f64>,
     /// Generated, corrected poses: S per particle, particle-major.
     samples: Vec<[f64; D]>,
     /// Per-action θ supports (normalised units of R), if configured.
@@ -302,6 +350,8 @@ impl Tracker {
             frame: 0,
             states: vec![init_state; m],
             next_states: vec![init_state; m],
+            speeds: vec![1.0; m],
+            next_speeds: vec![1.0; m],
             samples: vec![[0.0; D]; m * s],
             boxes,
             sample_ll: vec![0.0; m * s],
@@ -355,12 +405,13 @@ impl Tracker {
             frame,
         };
         let first = self.frame == 0;
-        let particle = |(i, (state, poses)): (usize, (&mut ActionState, &mut [[f64; D]]))| {
+        let particle = |(i, ((state, speed), poses)): ParticleItem<'_>| {
             let mut rng = stream(seed, DOMAIN_PARTICLE, kernel.frame, i as u64);
             if first {
                 *state = kernel.init(&mut rng);
+                *speed = kernel.draw_speed(&mut rng);
             } else {
-                kernel.propagate(state, &mut rng);
+                kernel.propagate(state, speed, &mut rng);
             }
             kernel.generate(state, &mut rng, obs, poses);
         };
@@ -368,12 +419,14 @@ impl Tracker {
         if m < 2 * MIN_PARTICLES_PER_TASK || rayon::current_num_threads() == 1 {
             self.states
                 .iter_mut()
+                .zip(self.speeds.iter_mut())
                 .zip(self.samples.chunks_mut(s))
                 .enumerate()
                 .for_each(particle);
         } else {
             self.states
                 .par_iter_mut()
+                .zip(self.speeds.par_iter_mut())
                 .zip(self.samples.par_chunks_mut(s))
                 .enumerate()
                 .with_min_len(MIN_PARTICLES_PER_TASK)
@@ -482,6 +535,12 @@ impl Tracker {
             *dst = self.states[a];
         }
         std::mem::swap(&mut self.states, &mut self.next_states);
+        if self.config.speed_range.is_some() {
+            for (dst, &a) in self.next_speeds.iter_mut().zip(&self.ancestors) {
+                *dst = self.speeds[a];
+            }
+            std::mem::swap(&mut self.speeds, &mut self.next_speeds);
+        }
     }
 
     /// Mixture resampling ([`ActionBalance::Mixture`]): resample within each action, n_a
@@ -653,6 +712,93 @@ mod tests {
             .collect()
     }
 
+    /// Per-particle speeds: a speed s takes ⌊s⌋ transition draws per frame plus one with
+    /// probability s − ⌊s⌋, so the mean advance over a few frames scales with s; speeds are
+    /// drawn log-uniformly from the range, kept within an action instance and redrawn on
+    /// re-entry; without a range the particles follow the model's timing exactly.
+    #[test]
+    fn particle_speeds_scale_the_progress() {
+        let n = 40;
+        let models = caches(0.0, n);
+        let grammar = GrammarCache::Uniform;
+        let cfg = TrackerConfig::builder(synthetic::table_region())
+            .speed_range(Some([0.5, 2.0]))
+            .build()
+            .unwrap();
+        let kernel = Kernel {
+            models: &models,
+            grammar: &grammar,
+            config: &cfg,
+            boxes: None,
+            frame: 1,
+        };
+        let mut rng = Pcg64Mcg::seed_from_u64(5);
+        let frames = 4;
+        let advance = |speed: f64, rng: &mut Pcg64Mcg| {
+            let trials = 20_000;
+            let mut total = 0.0;
+            for _ in 0..trials {
+                let mut s = ActionState {
+                    action: 0,
+                    theta: [0.0, 0.0],
+                    k: 0,
+                };
+                let mut sp = speed;
+                for _ in 0..frames {
+                    kernel.propagate(&mut s, &mut sp, rng);
+                }
+                assert_eq!(sp, speed, "no exit: the speed is kept");
+                total += s.k as f64;
+            }
+            total / f64::from(trials)
+        };
+        let base = advance(1.0, &mut rng);
+        assert!(base > 1.0, "{base}");
+        for s in [0.5, 1.5, 2.0] {
+            let ratio = advance(s, &mut rng) / base;
+            assert!(
+                (ratio - s).abs() < 0.05 * s,
+                "speed {s}: progress ratio {ratio}"
+            );
+        }
+        // Drawn log-uniformly: inside the range, median near the geometric mean.
+        let mut draws: Vec<f64> = (0..20_001).map(|_| kernel.draw_speed(&mut rng)).collect();
+        assert!(draws.iter().all(|&v| (0.5..=2.0).contains(&v)));
+        draws.sort_by(f64::total_cmp);
+        assert!(
+            (draws[10_000] - 1.0).abs() < 0.03,
+            "median {}",
+            draws[10_000]
+        );
+        // Redrawn on re-entry (from the last state of an exiting model).
+        let exiting = caches(1.0, 6);
+        let kernel = Kernel {
+            models: &exiting,
+            ..kernel
+        };
+        let mut s = ActionState {
+            action: 0,
+            theta: [0.0, 0.0],
+            k: 5,
+        };
+        let mut sp = 1.9;
+        while sp == 1.9 {
+            s.k = 5;
+            kernel.propagate(&mut s, &mut sp, &mut rng);
+        }
+        assert!((0.5..=2.0).contains(&sp));
+        // Validation.
+        for bad in [[0.0, 1.0], [1.5, 1.0], [1.0, 5.0], [f64::NAN, 1.0]] {
+            assert!(
+                TrackerConfig::builder(synthetic::table_region())
+                    .speed_range(Some(bad))
+                    .build()
+                    .is_err(),
+                "{bad:?}"
+            );
+        }
+    }
+
     /// Transition draws follow the model's banded row and exit probability.
     #[test]
     fn timing_follows_the_transition_row() {
@@ -719,7 +865,7 @@ mod tests {
                     theta: [0.9, 0.9],
                     k: last,
                 };
-                kernel.propagate(&mut s, rng);
+                kernel.propagate(&mut s, &mut 1.0, rng);
                 assert_eq!(s.k, 0, "re-entry at the first state");
                 counts[s.action] += 1;
                 thetas.push(s.theta);
@@ -769,7 +915,7 @@ mod tests {
                 theta: [0.0, 0.0],
                 k: n - 1,
             };
-            kernel.propagate(&mut s, &mut rng);
+            kernel.propagate(&mut s, &mut 1.0, &mut rng);
             assert_eq!((s.action, s.k), (2, n - 1));
             s2[0] += s.theta[0] * s.theta[0];
             s2[1] += s.theta[1] * s.theta[1];
@@ -785,7 +931,7 @@ mod tests {
             k: 0,
         };
         let before = s;
-        kernel.propagate(&mut s, &mut rng);
+        kernel.propagate(&mut s, &mut 1.0, &mut rng);
         assert!(s.k <= 3 && s.action == before.action);
     }
 
@@ -977,7 +1123,7 @@ mod tests {
                 "init outside its box: {s:?}"
             );
             for _ in 0..30 {
-                kernel.propagate(&mut s, &mut rng);
+                kernel.propagate(&mut s, &mut 1.0, &mut rng);
                 assert!(inside(s.action, s.theta, 1.25), "θ left its band: {s:?}");
             }
             seen[s.action] += 1;

@@ -72,6 +72,31 @@ pub struct Args {
     /// 5 cm) or `scene` (the scene's table region for every action, SPEC §3.2 literally).
     #[arg(long, value_enum, default_value_t = ThetaPriorArg::Training)]
     pub theta_prior: ThetaPriorArg,
+    /// Per-particle speeds `LO,HI` (e.g. `0.8,2.0`): each particle draws a speed log-uniformly
+    /// from [LO, HI] per action instance and takes that many transitions per frame on average,
+    /// for people who move faster or slower than the demonstrations. Default: the models'
+    /// timing.
+    #[arg(long, value_name = "LO,HI", value_parser = parse_speed_range)]
+    pub speed_range: Option<[f64; 2]>,
+}
+
+/// `--speed-range LO,HI`: two numbers, 0 < LO ≤ HI ≤ 4.
+fn parse_speed_range(s: &str) -> Result<[f64; 2], String> {
+    let v: Vec<&str> = s.split(',').map(str::trim).collect();
+    let [lo, hi] = v[..] else {
+        return Err(format!("expected LO,HI (e.g. 0.8,2.0), got `{s}`"));
+    };
+    let num = |x: &str| {
+        x.parse::<f64>()
+            .map_err(|_| format!("`{x}` is not a number (expected LO,HI, e.g. 0.8,2.0)"))
+    };
+    let (lo, hi) = (num(lo)?, num(hi)?);
+    if !(lo.is_finite() && hi.is_finite() && lo > 0.0 && lo <= hi && hi <= 4.0) {
+        return Err(format!(
+            "needs 0 < LO ≤ HI ≤ 4 (1 = the models' timing), got {lo},{hi}"
+        ));
+    }
+    Ok([lo, hi])
 }
 
 /// `--theta-prior`.
@@ -127,6 +152,7 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
             ThetaPriorArg::Training => ThetaPrior::Training,
             ThetaPriorArg::Scene => ThetaPrior::Scene,
         },
+        speed_range: args.speed_range,
     };
     let outputs = TrackOutputs {
         mcap: args.output.clone(),
