@@ -696,6 +696,21 @@ mod tests {
             .unwrap()
     }
 
+    /// The per-particle kernel of frame 1 without per-action θ supports.
+    fn test_kernel<'a>(
+        models: &'a [ActionCache],
+        grammar: &'a GrammarCache,
+        config: &'a TrackerConfig,
+    ) -> Kernel<'a> {
+        Kernel {
+            models,
+            grammar,
+            config,
+            boxes: None,
+            frame: 1,
+        }
+    }
+
     fn caches(exit: f64, n: usize) -> Vec<ActionCache> {
         SHAPES
             .iter()
@@ -725,13 +740,7 @@ mod tests {
             .speed_range(Some([0.5, 2.0]))
             .build()
             .unwrap();
-        let kernel = Kernel {
-            models: &models,
-            grammar: &grammar,
-            config: &cfg,
-            boxes: None,
-            frame: 1,
-        };
+        let kernel = test_kernel(&models, &grammar, &cfg);
         let mut rng = Pcg64Mcg::seed_from_u64(5);
         let frames = 4;
         let advance = |speed: f64, rng: &mut Pcg64Mcg| {
@@ -850,13 +859,7 @@ mod tests {
                         .collect(),
                 ),
             };
-            let kernel = Kernel {
-                models: &models,
-                grammar: &grammar,
-                config: &cfg,
-                boxes: None,
-                frame: 1,
-            };
+            let kernel = test_kernel(&models, &grammar, &cfg);
             let mut counts = [0_usize; 3];
             let mut thetas = Vec::new();
             for _ in 0..3000 {
@@ -899,13 +902,7 @@ mod tests {
         let models = caches(0.0, n);
         let cfg = config(Grammar::Uniform, Boundary::None);
         let grammar = GrammarCache::Uniform;
-        let kernel = Kernel {
-            models: &models,
-            grammar: &grammar,
-            config: &cfg,
-            boxes: None,
-            frame: 1,
-        };
+        let kernel = test_kernel(&models, &grammar, &cfg);
         let mut rng = Pcg64Mcg::seed_from_u64(11);
         let draws = 40_000;
         let mut s2 = [0.0; 2];

@@ -401,9 +401,9 @@ impl Run {
         }
     }
 
-    /// A clockwise arc (u right, v down: decreasing angle) of radius `r` around `c` from the
-    /// unit direction `from`, `n` points `θ = sweep / n` apart, the end point excluded.
-    fn arc(c: Vector2<f64>, r: f64, from: Vector2<f64>, sweep: f64, n: usize) -> Self {
+    /// The `n` points `c + u·cos kθ + w·sin kθ` of a circular arc (|u| = |w|, u ⟂ w), generated
+    /// by rotating the radius vectors instead of through cos/sin lanes.
+    fn circle(c: Vector2<f64>, u: Vector2<f64>, w: Vector2<f64>, theta: f64, n: usize) -> Self {
         let Self::Trig {
             u,
             w,
@@ -412,13 +412,7 @@ impl Run {
             cl,
             sl,
             ..
-        } = Self::trig(
-            c,
-            from * r,
-            Vector2::new(from.y, -from.x) * r,
-            sweep / n as f64,
-            n,
-        )
+        } = Self::trig(c, u, w, theta, n)
         else {
             unreachable!("trig gives a Trig run")
         };
@@ -525,37 +519,83 @@ impl Run {
     }
 }
 
+/// Receives the pieces of a part's analytic outline from [`Prepared::sample_outline`]: the
+/// geometry of the samples, shared by the CPU sampler ([`Run`]) and the GPU port (`gpu.rs`), so
+/// that both sample the same points.
+pub(crate) trait OutlineSink {
+    /// `n` points `p + (q − p)·k/n`, k = 0 … n−1.
+    fn line(&mut self, p: Vector2<f64>, q: Vector2<f64>, n: usize);
+    /// `n` points `c + u·cos kθ + w·sin kθ`, k = 0 … n−1; `circle`: a circular arc (|u| = |w|,
+    /// w = u turned clockwise by a right angle), otherwise an ellipse.
+    fn trig(
+        &mut self,
+        c: Vector2<f64>,
+        u: Vector2<f64>,
+        w: Vector2<f64>,
+        theta: f64,
+        n: usize,
+        circle: bool,
+    );
+}
+
+/// At most four [`Run`]s of one part.
+struct RunSink {
+    runs: [Run; 4],
+    n: usize,
+}
+
+impl OutlineSink for RunSink {
+    #[inline]
+    fn line(&mut self, p: Vector2<f64>, q: Vector2<f64>, n: usize) {
+        self.runs[self.n & 3] = Run::line(p, q, n);
+        self.n += 1;
+    }
+    #[inline]
+    fn trig(
+        &mut self,
+        c: Vector2<f64>,
+        u: Vector2<f64>,
+        w: Vector2<f64>,
+        theta: f64,
+        n: usize,
+        circle: bool,
+    ) {
+        self.runs[self.n & 3] = if circle {
+            Run::circle(c, u, w, theta, n)
+        } else {
+            Run::trig(c, u, w, theta, n)
+        };
+        self.n += 1;
+    }
+}
+
 impl Prepared {
-    /// The analytic samples every `step` pixels along the outline as at most four runs (see
-    /// [`Run`]); returns the runs and their number. The sample counts are those of
-    /// `walk_outline` (and of the GPU port's pieces).
+    /// The analytic samples every `step` pixels along the outline as at most four pieces, in
+    /// order, into `sink`. The sample counts are those of `walk_outline`.
     #[allow(clippy::inline_always)]
     #[inline(always)]
-    fn sample_runs(&self, step: f64) -> ([Run; 4], usize) {
+    pub(crate) fn sample_outline<S: OutlineSink>(&self, step: f64, sink: &mut S) {
         let arc_n = |r: f64, sweep: f64| ((r * sweep / step).ceil() as usize).clamp(1, 4096);
-        let arc = |c: Vector2<f64>, r: f64, from: Vector2<f64>, sweep: f64| {
-            Run::arc(c, r, from, sweep, arc_n(r, sweep))
-        };
-        let none = Run::Line {
-            p: Vector2::zeros(),
-            s: Vector2::zeros(),
-            n: 0,
+        // A clockwise arc (u right, v down: decreasing angle) of radius `r` around `c` from the
+        // unit direction `from`, the end point excluded.
+        let arc = |sink: &mut S, c: Vector2<f64>, r: f64, from: Vector2<f64>, sweep: f64| {
+            let n = arc_n(r, sweep);
+            let w = Vector2::new(from.y, -from.x) * r;
+            sink.trig(c, from * r, w, sweep / n as f64, n, true);
         };
         match *self {
-            Self::Circle { c, r } => (
-                [
-                    arc(c, r, Vector2::x(), std::f64::consts::TAU),
-                    none,
-                    none,
-                    none,
-                ],
-                1,
-            ),
+            Self::Circle { c, r } => arc(sink, c, r, Vector2::x(), std::f64::consts::TAU),
             Self::Ellipse { c, a, b, ea, eb } => {
                 let n = arc_n(a, std::f64::consts::TAU);
                 // x = c + ea·a·cos t + eb·b·sin t with t = −kθ.
-                let run = Run::trig(c, ea * a, -eb * b, std::f64::consts::TAU / n as f64, n);
-                ([run, none, none, none], 1)
+                sink.trig(
+                    c,
+                    ea * a,
+                    -eb * b,
+                    std::f64::consts::TAU / n as f64,
+                    n,
+                    false,
+                );
             }
             Self::Capsule {
                 c0,
@@ -573,17 +613,29 @@ impl Prepared {
                 let m = ((len * cos_a / step).ceil() as usize).clamp(1, 1 << 16);
                 let half = std::f64::consts::PI;
                 let alpha = sin_a.asin();
-                (
-                    [
-                        Run::line(c0 + np * r0, c1 + np * r1, m),
-                        arc(c1, r1, np, half - 2.0 * alpha),
-                        Run::line(c1 + nm * r1, c0 + nm * r0, m),
-                        arc(c0, r0, nm, half + 2.0 * alpha),
-                    ],
-                    4,
-                )
+                sink.line(c0 + np * r0, c1 + np * r1, m);
+                arc(sink, c1, r1, np, half - 2.0 * alpha);
+                sink.line(c1 + nm * r1, c0 + nm * r0, m);
+                arc(sink, c0, r0, nm, half + 2.0 * alpha);
             }
         }
+    }
+
+    /// [`Prepared::sample_outline`] as [`Run`]s: the runs and their number.
+    #[allow(clippy::inline_always)]
+    #[inline(always)]
+    fn sample_runs(&self, step: f64) -> ([Run; 4], usize) {
+        let none = Run::Line {
+            p: Vector2::zeros(),
+            s: Vector2::zeros(),
+            n: 0,
+        };
+        let mut sink = RunSink {
+            runs: [none; 4],
+            n: 0,
+        };
+        self.sample_outline(step, &mut sink);
+        (sink.runs, sink.n)
     }
 }
 /// Per-thread scratch for rasterising silhouettes: a mask that only grows, and a reusable path

@@ -883,6 +883,23 @@ mod tests {
         assert!(bad.is_err() || ws.compute_into(bad.unwrap(), &p, &mut out).is_err());
     }
 
+    /// Parameter sets of the bit-identity tests: the defaults, a binary map with a small σ, no
+    /// smoothing.
+    fn variant_params() -> [EdgeParams; 3] {
+        [
+            EdgeParams::default(),
+            EdgeParams {
+                tau: 0.35,
+                sigma: 1.5,
+                binary: true,
+            },
+            EdgeParams {
+                sigma: 0.0,
+                ..EdgeParams::default()
+            },
+        ]
+    }
+
     /// The variant chosen at run time (AVX2 on most x86-64 machines) gives the same G, bit for
     /// bit, as the baseline (SSE2) build of the same kernels.
     #[test]
@@ -890,18 +907,7 @@ mod tests {
         for &(w, h) in &[(45usize, 37usize), (67, 9), (2, 3)] {
             let rgb = test_frame(w, h);
             let frame = ImageView::rgb8(&rgb, w as u32, h as u32).unwrap();
-            for params in [
-                EdgeParams::default(),
-                EdgeParams {
-                    tau: 0.35,
-                    sigma: 1.5,
-                    binary: true,
-                },
-                EdgeParams {
-                    sigma: 0.0,
-                    ..EdgeParams::default()
-                },
-            ] {
+            for params in variant_params() {
                 let mut ws = EdgeWorkspace::new();
                 let fast = ws.compute(frame, &params).unwrap().clone();
                 let mut base = EdgeWorkspace::new();
@@ -920,18 +926,7 @@ mod tests {
     /// gives the same G as a fresh one.
     #[test]
     fn bands_and_threads_give_identical_g() {
-        let params = [
-            EdgeParams::default(),
-            EdgeParams {
-                tau: 0.35,
-                sigma: 1.5,
-                binary: true,
-            },
-            EdgeParams {
-                sigma: 0.0,
-                ..EdgeParams::default()
-            },
-        ];
+        let params = variant_params();
         let mut reused = EdgeWorkspace::new();
         for &(w, h) in &[
             (45usize, 37usize),

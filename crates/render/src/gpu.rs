@@ -34,7 +34,7 @@ use std::sync::{Arc, Mutex, mpsc};
 use bytemuck::{Pod, Zeroable};
 use nalgebra::Vector2;
 
-use crate::contour::{INSIDE_TOL, Prepared, project_prepared};
+use crate::contour::{INSIDE_TOL, OutlineSink, Prepared, project_prepared};
 use crate::{
     ArmGeometry, Camera, ContourMethod, EdgeImage, LikelihoodModel, RenderError, RenderScratch,
 };
@@ -176,52 +176,33 @@ impl Prepared {
         g
     }
 
-    /// Appends the pieces of the outline, in the CPU sampler's order and with its sample
-    /// counts (`walk_outline` with `polygon = false`).
+    /// Appends the pieces of the outline: the CPU sampler's ([`Prepared::sample_outline`]), in
+    /// its order and with its sample counts.
     fn pieces(&self, part: u32, step: f64, out: &mut Vec<GpuPiece>) {
-        let arc_n = |r: f64, sweep: f64| ((r * sweep / step).ceil() as usize).clamp(1, 4096);
-        // A clockwise arc from direction `from`: x_k = c + R(−kθ)·from·r.
-        let arc = |c: Vector2<f64>, r: f64, from: Vector2<f64>, sweep: f64| {
-            let n = arc_n(r, sweep);
-            let u = from * r;
-            let w = Vector2::new(from.y, -from.x) * r;
-            arc_piece(part, n, c, u, w, sweep / n as f64)
-        };
-        match *self {
-            Self::Circle { c, r } => out.push(arc(c, r, Vector2::x(), std::f64::consts::TAU)),
-            Self::Ellipse { c, a, b, ea, eb } => {
-                let n = arc_n(a, std::f64::consts::TAU);
-                out.push(arc_piece(
-                    part,
-                    n,
-                    c,
-                    ea * a,
-                    -eb * b,
-                    std::f64::consts::TAU / n as f64,
-                ));
-            }
-            Self::Capsule {
-                c0,
-                c1,
-                r0,
-                r1,
-                len,
-                d,
-                n,
-                sin_a,
-                cos_a,
-            } => {
-                let np = d * sin_a + n * cos_a;
-                let nm = d * sin_a - n * cos_a;
-                let m = ((len * cos_a / step).ceil() as usize).clamp(1, 1 << 16);
-                let half = std::f64::consts::PI;
-                let alpha = sin_a.asin();
-                out.push(line_piece(part, m, c0 + np * r0, c1 + np * r1));
-                out.push(arc(c1, r1, np, half - 2.0 * alpha));
-                out.push(line_piece(part, m, c1 + nm * r1, c0 + nm * r0));
-                out.push(arc(c0, r0, nm, half + 2.0 * alpha));
-            }
-        }
+        self.sample_outline(step, &mut PieceSink { part, out });
+    }
+}
+
+/// Collects a part's outline as GPU pieces.
+struct PieceSink<'a> {
+    part: u32,
+    out: &'a mut Vec<GpuPiece>,
+}
+
+impl OutlineSink for PieceSink<'_> {
+    fn line(&mut self, p: Vector2<f64>, q: Vector2<f64>, n: usize) {
+        self.out.push(line_piece(self.part, n, p, q));
+    }
+    fn trig(
+        &mut self,
+        c: Vector2<f64>,
+        u: Vector2<f64>,
+        w: Vector2<f64>,
+        theta: f64,
+        n: usize,
+        _circle: bool,
+    ) {
+        self.out.push(arc_piece(self.part, n, c, u, w, theta));
     }
 }
 
