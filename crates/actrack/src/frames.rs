@@ -340,7 +340,7 @@ enum Chroma {
 /// A YUV4MPEG2 stream reader (8-bit 4:2:0, 4:2:2, 4:4:4 and mono), converting to RGB8 with
 /// BT.601 coefficients (limited range unless the header says `XCOLORRANGE=FULL`).
 pub struct Y4mReader {
-    r: Box<dyn BufRead>,
+    r: Box<dyn BufRead + Send>,
     width: usize,
     height: usize,
     chroma: Chroma,
@@ -353,7 +353,7 @@ pub struct Y4mReader {
 
 impl Y4mReader {
     /// Reads the stream header; `name` is used in messages.
-    pub fn new(mut r: Box<dyn BufRead>, name: &Path) -> Result<Self> {
+    pub fn new(mut r: Box<dyn BufRead + Send>, name: &Path) -> Result<Self> {
         let mut line = Vec::new();
         r.read_until(b'\n', &mut line)
             .map_err(|e| Error::read(name, e))?;

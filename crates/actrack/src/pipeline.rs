@@ -23,7 +23,7 @@ use image::RgbImage;
 use nalgebra::Vector3;
 
 use crate::error::{Error, Result};
-use crate::frames::FrameSource;
+use crate::frames::{Frame, FrameSource};
 use crate::mcap_out::{EstimateMsg, FrameRecord, TrackWriter};
 use crate::model::ActionModel;
 use crate::scene::{Camera, Scene};
@@ -226,10 +226,55 @@ pub struct Pipeline {
     geometry: RenderArm,
     likelihood: LikelihoodModel,
     tracker: Tracker,
-    workspaces: Vec<EdgeWorkspace>,
-    /// The current frame's edge images, one per view used (buffers reused across frames).
+    /// The edge images the next filter step scores, one per view used (buffers reused).
     edges: Vec<EdgeImage>,
+    /// Whether `edges` holds a frame not yet tracked (see [`Pipeline::prime`]).
+    primed: bool,
+    /// Workspaces and the back buffer the next frame's edge images are computed into.
+    ahead: Lookahead,
     names: Vec<String>,
+}
+
+/// Where a frame's edge images are computed before the filter step that scores them: the
+/// workspaces of [`Pipeline`] and a back buffer. [`Pipeline::step_overlapped`] hands it to the
+/// work that runs alongside a filter step.
+pub struct Lookahead {
+    scene: Scene,
+    workspaces: Vec<EdgeWorkspace>,
+    edges: Vec<EdgeImage>,
+    /// Whether `edges` holds the images of a frame since the last swap.
+    ready: bool,
+}
+
+impl Lookahead {
+    /// Computes the edge images of `images` (one per camera; fewer: the missing views carry no
+    /// contour) into the back buffer. Errors name the frame when an image does not fit its
+    /// camera.
+    pub fn prepare(&mut self, frame: usize, images: &[&RgbImage]) -> Result<()> {
+        self.ready = false;
+        let views = images.len().min(self.scene.cameras.len());
+        self.edges.resize_with(views, EdgeImage::default);
+        for (v, img) in images.iter().enumerate().take(views) {
+            let cam = &self.scene.cameras[v];
+            if img.dimensions() != (cam.width, cam.height) {
+                return Err(Error::Config(format!(
+                    "frame {frame}: the image is {}×{} but camera `{}` of the scene is {}×{}",
+                    img.width(),
+                    img.height(),
+                    cam.name,
+                    cam.width,
+                    cam.height
+                )));
+            }
+            let view = ImageView::rgb8(img.as_raw(), img.width(), img.height())
+                .map_err(|e| Error::Config(format!("frame {frame}: {e}")))?;
+            self.workspaces[v]
+                .compute_into(view, &self.scene.edge_params(cam.width), &mut self.edges[v])
+                .map_err(|e| Error::Config(format!("frame {frame}: {e}")))?;
+        }
+        self.ready = true;
+        Ok(())
+    }
 }
 
 impl Pipeline {
@@ -268,8 +313,14 @@ impl Pipeline {
             geometry,
             likelihood,
             tracker,
-            workspaces: scene.cameras.iter().map(|_| EdgeWorkspace::new()).collect(),
             edges: Vec::with_capacity(scene.cameras.len()),
+            primed: false,
+            ahead: Lookahead {
+                scene: scene.clone(),
+                workspaces: scene.cameras.iter().map(|_| EdgeWorkspace::new()).collect(),
+                edges: Vec::with_capacity(scene.cameras.len()),
+                ready: false,
+            },
             names,
         })
     }
@@ -292,42 +343,97 @@ impl Pipeline {
     /// One step on synchronised images, one per camera (fewer: the missing views carry no
     /// contour). Errors name the frame when an image does not fit its camera.
     pub fn step(&mut self, frame: usize, images: &[&RgbImage]) -> Result<FrameResult> {
-        let views = images.len().min(self.scene.cameras.len());
-        self.edges.resize_with(views, EdgeImage::default);
-        for (v, img) in images.iter().enumerate().take(views) {
-            let cam = &self.scene.cameras[v];
-            if img.dimensions() != (cam.width, cam.height) {
-                return Err(Error::Config(format!(
-                    "frame {frame}: the image is {}×{} but camera `{}` of the scene is {}×{}",
-                    img.width(),
-                    img.height(),
-                    cam.name,
-                    cam.width,
-                    cam.height
-                )));
-            }
-            let view = ImageView::rgb8(img.as_raw(), img.width(), img.height())
-                .map_err(|e| Error::Config(format!("frame {frame}: {e}")))?;
-            self.workspaces[v]
-                .compute_into(view, &self.scene.edge_params(cam.width), &mut self.edges[v])
-                .map_err(|e| Error::Config(format!("frame {frame}: {e}")))?;
+        self.prime(frame, images)?;
+        self.primed = false;
+        Ok(self.filter())
+    }
+
+    /// Computes the edge images of a frame that [`Pipeline::step_overlapped`] then tracks.
+    pub fn prime(&mut self, frame: usize, images: &[&RgbImage]) -> Result<()> {
+        self.ahead.prepare(frame, images)?;
+        self.swap_ahead();
+        Ok(())
+    }
+
+    /// Tracks the primed frame (by [`Pipeline::prime`] or the previous call) while `alongside`
+    /// runs with the [`Lookahead`] (`rayon::join`: both share the pool's threads). `alongside`
+    /// typically decodes the next frame and calls [`Lookahead::prepare`] on it; if it did, that
+    /// frame is primed for the next call. On one thread this is the serial order; on more, the
+    /// next frame's decoding and edge image overlap the filter's serial parts. The estimates are
+    /// bit-identical to [`Pipeline::step`]'s.
+    ///
+    /// # Errors
+    /// When no frame is primed.
+    pub fn step_overlapped<R: Send>(
+        &mut self,
+        alongside: impl FnOnce(&mut Lookahead) -> R + Send,
+    ) -> Result<(FrameResult, R)> {
+        if !self.primed {
+            return Err(Error::Config(
+                "step_overlapped: no frame primed (call prime first)".into(),
+            ));
         }
-        let obs = SceneObservation {
-            scene: &self.scene,
-            geometry: &self.geometry,
-            likelihood: &self.likelihood,
-            edges: &self.edges,
-        };
-        let estimate = self.tracker.step(&obs);
-        let best_world = self.scene.pose_to_world(&estimate.best_pose);
-        let smoothed_world = self.scene.pose_to_world(&estimate.smoothed_pose);
-        let theta_world = self.scene.theta_to_world(estimate.theta_mean);
-        Ok(FrameResult {
-            estimate,
-            best_world,
-            smoothed_world,
-            theta_world,
-        })
+        self.ahead.ready = false;
+        let Self {
+            scene,
+            geometry,
+            likelihood,
+            tracker,
+            edges,
+            ahead,
+            ..
+        } = self;
+        let (r, side) = rayon::join(
+            || filter(scene, geometry, likelihood, tracker, edges),
+            || alongside(ahead),
+        );
+        self.primed = false;
+        if self.ahead.ready {
+            self.swap_ahead();
+        }
+        Ok((r, side))
+    }
+
+    fn swap_ahead(&mut self) {
+        std::mem::swap(&mut self.edges, &mut self.ahead.edges);
+        self.ahead.ready = false;
+        self.primed = true;
+    }
+
+    fn filter(&mut self) -> FrameResult {
+        filter(
+            &self.scene,
+            &self.geometry,
+            &self.likelihood,
+            &mut self.tracker,
+            &self.edges,
+        )
+    }
+}
+
+/// One filter step on `edges` and the estimates mapped to the world.
+fn filter(
+    scene: &Scene,
+    geometry: &RenderArm,
+    likelihood: &LikelihoodModel,
+    tracker: &mut Tracker,
+    edges: &[EdgeImage],
+) -> FrameResult {
+    let obs = SceneObservation {
+        scene,
+        geometry,
+        likelihood,
+        edges,
+    };
+    let estimate = tracker.step(&obs);
+    let best_world = scene.pose_to_world(&estimate.best_pose);
+    let smoothed_world = scene.pose_to_world(&estimate.smoothed_pose);
+    let theta_world = scene.theta_to_world(estimate.theta_mean);
+    FrameResult {
+        estimate,
+        best_world,
+        smoothed_world,
+        theta_world,
     }
 }
 
@@ -456,17 +562,38 @@ pub fn track(
     };
     let mut interrupted = false;
     let mut cloud = Vec::new();
+    // One frame of look-ahead: while the filter tracks frame t, frame t + 1 is decoded and its
+    // edge image computed (`Pipeline::step_overlapped`). An error reading or preparing frame
+    // t + 1 is returned after frame t is done, as the serial loop would.
+    let mut next = source.next_frame()?;
+    if let Some(f) = &next {
+        pipeline.prime(f.index, &[&f.image])?;
+    }
+    let mut pending: Option<Error> = None;
     loop {
+        if let Some(e) = pending.take() {
+            return Err(e);
+        }
         if stop.load(Ordering::Relaxed) {
             interrupted = true;
             break;
         }
-        let Some(frame) = source.next_frame()? else {
+        let Some(frame) = next.take() else {
             break;
         };
         let t0 = Instant::now();
-        let r = pipeline.step(frame.index, &[&frame.image])?;
+        let (r, read) = pipeline.step_overlapped(|ahead| -> Result<Option<Frame>> {
+            let f = source.next_frame()?;
+            if let Some(f) = &f {
+                ahead.prepare(f.index, &[&f.image])?;
+            }
+            Ok(f)
+        })?;
         filter_seconds += t0.elapsed().as_secs_f64();
+        match read {
+            Ok(f) => next = f,
+            Err(e) => pending = Some(e),
+        }
         traj.rows
             .push(track_row(frame.index, frame.time, &names, &r));
         let need_contour = outputs.overlay.is_some() || (writer.is_some() && outputs.mcap_images);
@@ -541,4 +668,87 @@ pub fn track(
         skipped: source.skipped().to_vec(),
         trajectory: traj,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bench::{BenchOptions, prepare};
+
+    /// The overlapped loop (next frame's edge image alongside the filter step, on two threads)
+    /// tracks exactly as the serial one; a step with nothing primed is an error, not a stale
+    /// frame tracked twice.
+    #[test]
+    #[allow(clippy::float_cmp)] // bit-identical estimates are the claim
+    fn overlapped_steps_equal_serial_steps() {
+        let opts = BenchOptions {
+            width: 160,
+            height: 120,
+            states: 6,
+            ..BenchOptions::default()
+        };
+        let prep = prepare(&opts, 6).unwrap();
+        let frames: Vec<RgbImage> = prep
+            .frames
+            .iter()
+            .map(|v| RgbImage::from_raw(v[0].width, v[0].height, v[0].data.clone()).unwrap())
+            .collect();
+        let track = TrackOptions {
+            particles: 60,
+            seed: 5,
+            ..TrackOptions::default()
+        };
+        let mut serial = Pipeline::new(&prep.model, &prep.scene, &track).unwrap();
+        let want: Vec<FrameResult> = frames
+            .iter()
+            .enumerate()
+            .map(|(t, f)| serial.step(t, &[f]).unwrap())
+            .collect();
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(2)
+            .build()
+            .unwrap();
+        let got = pool.install(|| {
+            let mut p = Pipeline::new(&prep.model, &prep.scene, &track).unwrap();
+            assert!(p.step_overlapped(|_| ()).is_err());
+            p.prime(0, &[&frames[0]]).unwrap();
+            let mut out = Vec::new();
+            for t in 0..frames.len() {
+                let (r, ()) = p
+                    .step_overlapped(|ahead| {
+                        if let Some(f) = frames.get(t + 1) {
+                            ahead.prepare(t + 1, &[f]).unwrap();
+                        }
+                    })
+                    .unwrap();
+                out.push(r);
+            }
+            assert!(p.step_overlapped(|_| ()).is_err());
+            out
+        });
+        assert_eq!(got.len(), want.len());
+        for (g, w) in got.iter().zip(&want) {
+            assert_eq!(g.estimate.best_pose, w.estimate.best_pose);
+            assert_eq!(g.estimate.smoothed_pose, w.estimate.smoothed_pose);
+            assert_eq!(g.estimate.action_posterior, w.estimate.action_posterior);
+            assert_eq!(g.estimate.theta_mean, w.estimate.theta_mean);
+        }
+    }
+
+    /// A frame that does not fit the camera is an error naming it, and leaves nothing primed.
+    #[test]
+    fn lookahead_names_a_frame_of_the_wrong_size() {
+        let opts = BenchOptions {
+            width: 160,
+            height: 120,
+            states: 4,
+            ..BenchOptions::default()
+        };
+        let prep = prepare(&opts, 1).unwrap();
+        let mut p = Pipeline::new(&prep.model, &prep.scene, &TrackOptions::default()).unwrap();
+        let wrong = RgbImage::new(100, 100);
+        let e = p.prime(7, &[&wrong]).unwrap_err().to_string();
+        assert!(e.contains("frame 7"), "{e}");
+        assert!(p.step_overlapped(|_| ()).is_err());
+    }
 }
