@@ -673,7 +673,18 @@ pub fn track(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::bench::{BenchOptions, prepare};
+    use crate::bench::{BenchOptions, Prepared, prepare};
+
+    /// Generator-trained models and `frames` rendered frames at 160×120.
+    fn small(states: usize, frames: usize) -> Prepared {
+        let opts = BenchOptions {
+            width: 160,
+            height: 120,
+            states,
+            ..BenchOptions::default()
+        };
+        prepare(&opts, frames).unwrap()
+    }
 
     /// The overlapped loop (next frame's edge image alongside the filter step, on two threads)
     /// tracks exactly as the serial one; a step with nothing primed is an error, not a stale
@@ -681,13 +692,7 @@ mod tests {
     #[test]
     #[allow(clippy::float_cmp)] // bit-identical estimates are the claim
     fn overlapped_steps_equal_serial_steps() {
-        let opts = BenchOptions {
-            width: 160,
-            height: 120,
-            states: 6,
-            ..BenchOptions::default()
-        };
-        let prep = prepare(&opts, 6).unwrap();
+        let prep = small(6, 6);
         let frames: Vec<RgbImage> = prep
             .frames
             .iter()
@@ -738,13 +743,7 @@ mod tests {
     /// A frame that does not fit the camera is an error naming it, and leaves nothing primed.
     #[test]
     fn lookahead_names_a_frame_of_the_wrong_size() {
-        let opts = BenchOptions {
-            width: 160,
-            height: 120,
-            states: 4,
-            ..BenchOptions::default()
-        };
-        let prep = prepare(&opts, 1).unwrap();
+        let prep = small(4, 1);
         let mut p = Pipeline::new(&prep.model, &prep.scene, &TrackOptions::default()).unwrap();
         let wrong = RgbImage::new(100, 100);
         let e = p.prime(7, &[&wrong]).unwrap_err().to_string();
