@@ -223,10 +223,38 @@ impl PyTracker {
         py: Python<'py>,
         frames: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyDict>> {
+        // One frame of look-ahead, as `track_video`: while the filter tracks frame t (GIL
+        // released), frame t + 1's edge image is computed alongside; frames are converted from
+        // Python one ahead, under the GIL.
         let mut results = Vec::new();
-        for f in frames.try_iter()? {
-            let images = Self::images(&f?)?;
-            results.push(self.step_images(py, &images)?);
+        let mut iter = frames.try_iter()?;
+        let mut next = iter.next().map(|f| Self::images(&f?)).transpose()?;
+        if let Some(images) = &next {
+            let (index, pipeline) = (self.frames, &mut self.pipeline);
+            py.detach(|| {
+                let refs: Vec<&RgbImage> = images.iter().collect();
+                pipeline.prime(index, &refs)
+            })
+            .map_err(|e| actrack_error(&e))?;
+        }
+        while next.take().is_some() {
+            let upcoming = iter.next().map(|f| Self::images(&f?)).transpose()?;
+            let (index, pipeline) = (self.frames, &mut self.pipeline);
+            let (r, prepared) = py
+                .detach(|| {
+                    pipeline.step_overlapped(|ahead| match &upcoming {
+                        Some(images) => {
+                            let refs: Vec<&RgbImage> = images.iter().collect();
+                            ahead.prepare(index + 1, &refs)
+                        }
+                        None => Ok(()),
+                    })
+                })
+                .map_err(|e| actrack_error(&e))?;
+            self.frames += 1;
+            results.push(r);
+            prepared.map_err(|e| actrack_error(&e))?;
+            next = upcoming;
         }
         let t = results.len();
         let a = self.names.len();

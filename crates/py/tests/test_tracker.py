@@ -60,6 +60,30 @@ def test_track_is_deterministic(model, scene):
     np.testing.assert_allclose(a["action_posterior"].sum(axis=1), 1.0)
 
 
+def test_track_equals_frame_by_frame_steps(model, scene):
+    """`track` overlaps each step with the next frame's edge image; the estimates are those of
+    `step` called frame by frame, and frame numbering carries on after it."""
+    frames = synthetic_frames(5)
+    whole = actrack.Tracker(model, scene, n_particles=64, seed=9)
+    a = whole.track(frames)
+    one = actrack.Tracker(model, scene, n_particles=64, seed=9)
+    steps = [one.step(f) for f in frames]
+    np.testing.assert_array_equal(a["best_pose"], np.stack([e.best_pose for e in steps]))
+    np.testing.assert_array_equal(a["smoothed_pose"], np.stack([e.smoothed_pose for e in steps]))
+    np.testing.assert_array_equal(a["theta_mean"], np.stack([e.theta_mean for e in steps]))
+    np.testing.assert_array_equal(
+        a["action_posterior"][:, 0], [e.action_posterior["reach"] for e in steps]
+    )
+    assert whole.step(frames[0]).frame == 5
+
+
+def test_track_names_a_bad_frame_mid_sequence(model, scene):
+    frames = list(synthetic_frames(3))
+    frames.insert(2, np.zeros((50, 60), dtype=np.uint8))
+    with pytest.raises(actrack.ActrackError, match="frame 2"):
+        actrack.Tracker(model, scene, n_particles=16).track(frames)
+
+
 def test_bad_frames(model, scene):
     tracker = actrack.Tracker(model, scene, n_particles=16)
     with pytest.raises(actrack.ActrackError, match="160×120"):
