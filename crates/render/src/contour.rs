@@ -575,18 +575,33 @@ impl Prepared {
     #[allow(clippy::inline_always)]
     #[inline(always)]
     pub(crate) fn sample_outline<S: OutlineSink>(&self, step: f64, sink: &mut S) {
-        let arc_n = |r: f64, sweep: f64| ((r * sweep / step).ceil() as usize).clamp(1, 4096);
+        // Functions, not closures: a closure's body stays out of line here, and the AVX2 sink
+        // must be inlined into the dispatched function.
+        #[allow(clippy::inline_always)]
+        #[inline(always)]
+        fn arc_n(r: f64, sweep: f64, step: f64) -> usize {
+            ((r * sweep / step).ceil() as usize).clamp(1, 4096)
+        }
         // A clockwise arc (u right, v down: decreasing angle) of radius `r` around `c` from the
         // unit direction `from`, the end point excluded.
-        let arc = |sink: &mut S, c: Vector2<f64>, r: f64, from: Vector2<f64>, sweep: f64| {
-            let n = arc_n(r, sweep);
+        #[allow(clippy::inline_always)]
+        #[inline(always)]
+        fn arc<S: OutlineSink>(
+            sink: &mut S,
+            step: f64,
+            c: Vector2<f64>,
+            r: f64,
+            from: Vector2<f64>,
+            sweep: f64,
+        ) {
+            let n = arc_n(r, sweep, step);
             let w = Vector2::new(from.y, -from.x) * r;
             sink.trig(c, from * r, w, sweep / n as f64, n, true);
-        };
+        }
         match *self {
-            Self::Circle { c, r } => arc(sink, c, r, Vector2::x(), std::f64::consts::TAU),
+            Self::Circle { c, r } => arc(sink, step, c, r, Vector2::x(), std::f64::consts::TAU),
             Self::Ellipse { c, a, b, ea, eb } => {
-                let n = arc_n(a, std::f64::consts::TAU);
+                let n = arc_n(a, std::f64::consts::TAU, step);
                 // x = c + ea·a·cos t + eb·b·sin t with t = −kθ.
                 sink.trig(
                     c,
@@ -614,9 +629,9 @@ impl Prepared {
                 let half = std::f64::consts::PI;
                 let alpha = sin_a.asin();
                 sink.line(c0 + np * r0, c1 + np * r1, m);
-                arc(sink, c1, r1, np, half - 2.0 * alpha);
+                arc(sink, step, c1, r1, np, half - 2.0 * alpha);
                 sink.line(c1 + nm * r1, c0 + nm * r0, m);
-                arc(sink, c0, r0, nm, half + 2.0 * alpha);
+                arc(sink, step, c0, r0, nm, half + 2.0 * alpha);
             }
         }
     }
@@ -1004,6 +1019,8 @@ impl Inside {
 struct Occluders<'a> {
     shapes: [&'a Inside; 2],
     boxes: [[f64; 4]; 2],
+    /// The parts in the used slots.
+    idx: [usize; 2],
     /// Number of used slots.
     n: usize,
 }
@@ -1210,9 +1227,14 @@ impl<C: Fn(f64, f64) -> f64> pulp::WithSimd for SumOp<'_, C> {
 /// the read of G and `(1 − G)²` of four samples at a time.
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
-    use pulp::{Simd, f32x4, f64x4, m64x4, x86::V3};
+    use pulp::{Simd, f32x4, f32x8, f64x4, i32x8, m32x8, m64x4, x86::V3};
 
-    use super::{Inside, LANES, Occluders, Projected, Run, occluders, part_boxes};
+    use nalgebra::Vector2;
+
+    use super::{Inside, LANES, Occluders, Prepared, Projected, Run, occluders, part_boxes};
+
+    /// Lanes of the f32 loop: eight samples per AVX2 register.
+    const L8: usize = 8;
 
     /// Whether any lane of `m` is set.
     #[allow(clippy::inline_always)]
@@ -1220,6 +1242,13 @@ mod avx2 {
     fn any(m: m64x4) -> bool {
         let a: [u64; LANES] = pulp::cast(m);
         (a[0] | a[1] | a[2] | a[3]) != 0
+    }
+
+    /// The lanes of `m` as the bits of an integer (`vmovmskps`).
+    #[allow(clippy::inline_always)]
+    #[inline(always)]
+    fn bits(s: V3, m: m32x8) -> u32 {
+        s.avx._mm256_movemask_ps(pulp::cast(m)).cast_unsigned()
     }
 
     /// `Σ (1 − G)²` over the analytic contour samples at their rounded pixels, and their number.
@@ -1231,15 +1260,455 @@ mod avx2 {
         pub step: f64,
         pub data: &'a [f32],
         pub stride: usize,
+        /// Redo every chunk by the f64 loop (tests).
+        pub force_fallback: bool,
     }
 
     /// Accumulators and constants of the loop.
     struct Acc<'a> {
         simd: V3,
         data: &'a [f32],
+        /// The row stride, for the f64 chunks (fallback) and the f32 ones.
         stride: f64x4,
+        stride_i: i32x8,
         sum: f64x4,
-        count: f64x4,
+        /// Number of samples.
+        n: usize,
+    }
+
+    /// The "more than [`super::INSIDE_TOL`] inside" test of an occluder in f32, in coordinates relative
+    /// to the anchor of the part whose samples it tests, with every threshold moved by the error
+    /// bound `t` both ways: lanes below the lower threshold are deep in the f64 test
+    /// ([`Inside::deep`] at the f64 positions), lanes above the upper one are not, the rest are
+    /// ambiguous. `[lo, hi]` pairs are these two thresholds.
+    #[derive(Clone, Copy)]
+    enum Shape32 {
+        Never,
+        Disc {
+            c: [f32; 2],
+            r2: [f32; 2],
+        },
+        Capsule {
+            c0: [f32; 2],
+            c1: [f32; 2],
+            d: [f32; 2],
+            n: [f32; 2],
+            /// The cap-at-c0 region is `s < lo` (f64), the cap-at-c1 region `s > hi`.
+            lo: [f32; 2],
+            hi: [f32; 2],
+            r0sq: [f32; 2],
+            r1sq: [f32; 2],
+            sin_a: f32,
+            cos_a: f32,
+            lim: [f32; 2],
+        },
+        Ellipse {
+            c: [f32; 2],
+            ea: [f32; 2],
+            eb: [f32; 2],
+            k2: [f32; 2],
+        },
+    }
+
+    /// `[x − t, x + t]` in f32.
+    fn pair(x: f64, t: f64) -> [f32; 2] {
+        [(x - t) as f32, (x + t) as f32]
+    }
+
+    /// A point relative to the anchor `a`, in f32.
+    fn rel(p: nalgebra::Vector2<f64>, a: [f64; 2]) -> [f32; 2] {
+        [(p.x - a[0]) as f32, (p.y - a[1]) as f32]
+    }
+
+    fn f32s(v: nalgebra::Vector2<f64>) -> [f32; 2] {
+        [v.x as f32, v.y as f32]
+    }
+
+    impl Shape32 {
+        /// Per lane: (surely deep, surely not deep) in the f64 test.
+        #[allow(clippy::inline_always)]
+        #[inline(always)]
+        fn test(&self, s: V3, x: f32x8, y: f32x8) -> (m32x8, m32x8) {
+            let sp = |a: f32| s.splat_f32s(a);
+            match *self {
+                Self::Never => (pulp::cast([0u32; L8]), pulp::cast([u32::MAX; L8])),
+                Self::Disc { c, r2 } => {
+                    let (dx, dy) = (s.sub_f32s(x, sp(c[0])), s.sub_f32s(y, sp(c[1])));
+                    below_above(s, norm2(s, dx, dy), r2)
+                }
+                Self::Capsule {
+                    c0,
+                    c1,
+                    d,
+                    n,
+                    lo,
+                    hi,
+                    r0sq,
+                    r1sq,
+                    sin_a,
+                    cos_a,
+                    lim,
+                } => {
+                    let (rx, ry) = (s.sub_f32s(x, sp(c0[0])), s.sub_f32s(y, sp(c0[1])));
+                    let (qx, qy) = (s.sub_f32s(x, sp(c1[0])), s.sub_f32s(y, sp(c1[1])));
+                    let sd = dot(s, rx, ry, d);
+                    let f = s.mul_add_e_f32s(
+                        sd,
+                        sp(sin_a),
+                        s.mul_f32s(s.abs_f32s(dot(s, rx, ry, n)), sp(cos_a)),
+                    );
+                    let (side_deep, side_out) = below_above(s, f, lim);
+                    let (cap0_deep, cap0_out) = below_above(s, norm2(s, rx, ry), r0sq);
+                    let (cap1_deep, cap1_out) = below_above(s, norm2(s, qx, qy), r1sq);
+                    // Regions the f64 test may select: cap 0 (s < lo), side, cap 1 (s > hi).
+                    let maybe0 = s.less_than_f32s(sd, sp(lo[1]));
+                    let maybe1 = s.greater_than_f32s(sd, sp(hi[0]));
+                    let maybe_side = s.and_m32s(
+                        s.greater_than_or_equal_f32s(sd, sp(lo[0])),
+                        s.less_than_or_equal_f32s(sd, sp(hi[1])),
+                    );
+                    // Sure when it holds in every region that may be selected.
+                    let (n0, ns, n1) = (
+                        s.not_m32s(maybe0),
+                        s.not_m32s(maybe_side),
+                        s.not_m32s(maybe1),
+                    );
+                    let deep = s.and_m32s(
+                        s.and_m32s(s.or_m32s(n0, cap0_deep), s.or_m32s(ns, side_deep)),
+                        s.or_m32s(n1, cap1_deep),
+                    );
+                    let out = s.and_m32s(
+                        s.and_m32s(s.or_m32s(n0, cap0_out), s.or_m32s(ns, side_out)),
+                        s.or_m32s(n1, cap1_out),
+                    );
+                    (deep, out)
+                }
+                Self::Ellipse { c, ea, eb, k2 } => {
+                    let (rx, ry) = (s.sub_f32s(x, sp(c[0])), s.sub_f32s(y, sp(c[1])));
+                    let (xa, xb) = (dot(s, rx, ry, ea), dot(s, rx, ry, eb));
+                    below_above(s, norm2(s, xa, xb), k2)
+                }
+            }
+        }
+    }
+
+    /// `a·b` of two-vector lanes and a constant.
+    #[allow(clippy::inline_always)]
+    #[inline(always)]
+    fn dot(s: V3, ax: f32x8, ay: f32x8, b: [f32; 2]) -> f32x8 {
+        s.mul_add_e_f32s(ax, s.splat_f32s(b[0]), s.mul_f32s(ay, s.splat_f32s(b[1])))
+    }
+
+    /// `|a|²` of two-vector lanes.
+    #[allow(clippy::inline_always)]
+    #[inline(always)]
+    fn norm2(s: V3, ax: f32x8, ay: f32x8) -> f32x8 {
+        s.mul_add_e_f32s(ax, ax, s.mul_f32s(ay, ay))
+    }
+
+    /// `(q < lo, q > hi)` per lane.
+    #[allow(clippy::inline_always)]
+    #[inline(always)]
+    fn below_above(s: V3, q: f32x8, th: [f32; 2]) -> (m32x8, m32x8) {
+        (
+            s.less_than_f32s(q, s.splat_f32s(th[0])),
+            s.greater_than_f32s(q, s.splat_f32s(th[1])),
+        )
+    }
+
+    /// How a [`Run32`] generates its samples.
+    #[derive(Clone, Copy)]
+    enum Gen32 {
+        /// `p + k·s`.
+        Line { p: [f32; 2], s: [f32; 2] },
+        /// `c + r_k`: radius vectors of the first chunk, rotated by 8θ per chunk.
+        Arc {
+            c: [f32; 2],
+            rx: f32x8,
+            ry: f32x8,
+            c8: f32,
+            s8: f32,
+        },
+        /// `c + u·cos kθ + w·sin kθ`: cos and sin of the first chunk, rotated by 8θ.
+        Trig {
+            c: [f32; 2],
+            u: [f32; 2],
+            w: [f32; 2],
+            co: f32x8,
+            si: f32x8,
+            c8: f32,
+            s8: f32,
+        },
+    }
+
+    /// A [`Run`] for the f32 loop, relative to the anchor: `n` samples, the bound `tol` of
+    /// their error against the f64 positions, and a box (f64) that holds them.
+    #[derive(Clone, Copy)]
+    struct Run32 {
+        samples: Gen32,
+        n: usize,
+        tol: f64,
+        bx: [f64; 4],
+    }
+
+    /// The larger magnitude of a vector's coordinates.
+    #[allow(clippy::inline_always)]
+    #[inline(always)]
+    fn inf(x: f64, y: f64) -> f64 {
+        let (x, y) = (x.abs(), y.abs());
+        if x > y { x } else { y }
+    }
+
+    /// Two f64x4 as one f32x8.
+    #[allow(clippy::inline_always)]
+    #[inline(always)]
+    fn to_f32x8(s: V3, lo: f64x4, hi: f64x4) -> f32x8 {
+        pulp::cast([s.convert_f64x4_to_f32x4(lo), s.convert_f64x4_to_f32x4(hi)])
+    }
+
+    /// `uc·co + wc·si`.
+    #[allow(clippy::inline_always)]
+    #[inline(always)]
+    fn comb(s: V3, co: f64x4, si: f64x4, uc: f64, wc: f64) -> f64x4 {
+        s.add_f64s(
+            s.mul_f64s(s.splat_f64s(uc), co),
+            s.mul_f64s(s.splat_f64s(wc), si),
+        )
+    }
+
+    // The tolerances: a few f32 roundings of the magnitudes involved, and for the rotations
+    // one per step of 8θ (test `f32_positions_are_within_the_bound` checks them with a margin).
+    impl Run32 {
+        #[allow(clippy::inline_always)]
+        #[inline(always)]
+        fn line(a: [f64; 2], p: Vector2<f64>, q: Vector2<f64>, n: usize) -> Self {
+            let (x0, y0) = (p.x - a[0], p.y - a[1]);
+            let (x1, y1) = (q.x - a[0], q.y - a[1]);
+            let st = (q - p) / n as f64;
+            let m = 1e-3;
+            Self {
+                samples: Gen32::Line {
+                    p: [x0 as f32, y0 as f32],
+                    s: [st.x as f32, st.y as f32],
+                },
+                n,
+                tol: 2e-6 + 4e-7 * (inf(x0, y0) + inf(x1 - x0, y1 - y0) + 1.0),
+                bx: [
+                    x0.min(x1) - m,
+                    y0.min(y1) - m,
+                    x0.max(x1) + m,
+                    y0.max(y1) + m,
+                ],
+            }
+        }
+
+        #[allow(clippy::inline_always, clippy::many_single_char_names)]
+        #[inline(always)]
+        fn trig(
+            s: V3,
+            a: [f64; 2],
+            c: Vector2<f64>,
+            u: Vector2<f64>,
+            w: Vector2<f64>,
+            theta: f64,
+            n: usize,
+            circle: bool,
+        ) -> Self {
+            let (cx, cy) = (c.x - a[0], c.y - a[1]);
+            // cos kθ, sin kθ for k = 0 … 7 (the f64 run's products for k ≤ 3, then 4θ on).
+            let (s1, c1) = super::sin_cos(theta);
+            let (c2, s2) = (c1 * c1 - s1 * s1, 2.0 * c1 * s1);
+            let (c3, s3) = (c2 * c1 - s2 * s1, s2 * c1 + c2 * s1);
+            let (c4, s4) = (c2 * c2 - s2 * s2, 2.0 * c2 * s2);
+            let (co0, si0) = (f64x4(1.0, c1, c2, c3), f64x4(0.0, s1, s2, s3));
+            let (c4v, s4v) = (s.splat_f64s(c4), s.splat_f64s(s4));
+            let co1 = s.sub_f64s(s.mul_f64s(co0, c4v), s.mul_f64s(si0, s4v));
+            let si1 = s.add_f64s(s.mul_f64s(si0, c4v), s.mul_f64s(co0, s4v));
+            let (c8, s8) = ((c4 * c4 - s4 * s4) as f32, (2.0 * c4 * s4) as f32);
+            let r = u.x.abs() + u.y.abs() + w.x.abs() + w.y.abs();
+            let steps = (n / L8 + 2) as f64;
+            let samples = if circle {
+                Gen32::Arc {
+                    c: [cx as f32, cy as f32],
+                    rx: to_f32x8(s, comb(s, co0, si0, u.x, w.x), comb(s, co1, si1, u.x, w.x)),
+                    ry: to_f32x8(s, comb(s, co0, si0, u.y, w.y), comb(s, co1, si1, u.y, w.y)),
+                    c8,
+                    s8,
+                }
+            } else {
+                Gen32::Trig {
+                    c: [cx as f32, cy as f32],
+                    u: [u.x as f32, u.y as f32],
+                    w: [w.x as f32, w.y as f32],
+                    co: to_f32x8(s, co0, co1),
+                    si: to_f32x8(s, si0, si1),
+                    c8,
+                    s8,
+                }
+            };
+            let (ex, ey) = (u.x.abs() + w.x.abs() + 1e-3, u.y.abs() + w.y.abs() + 1e-3);
+            Self {
+                samples,
+                n,
+                tol: 2e-6 + 4e-7 * (inf(cx, cy) + r + 1.0) + 4e-7 * r * steps,
+                bx: [cx - ex, cy - ey, cx + ex, cy + ey],
+            }
+        }
+    }
+
+    /// A bound of [`Run32::tol`] over every run of `part`'s outline (spacing `step`), whose
+    /// coordinates relative to the anchor are at most `m`.
+    fn tolerance_bound(part: &Prepared, m: f64, step: f64) -> f64 {
+        // Arcs: |u|₁ + |w|₁ ≤ 2√2·r, at most 2πr/Δ samples; lines at most as long as the part.
+        let arcs = |r: f64| {
+            let big = 2.9 * r;
+            2e-6 + 4e-7 * (m + big + 1.0)
+                + 4e-7 * big * (r * std::f64::consts::TAU / step / 8.0 + 3.0)
+        };
+        match *part {
+            Prepared::Circle { r, .. } => arcs(r),
+            Prepared::Capsule { r0, r1, len, .. } => {
+                arcs(r0.max(r1)).max(2e-6 + 4e-7 * (m + len + 1.0))
+            }
+            Prepared::Ellipse { a, b, .. } => {
+                let big = 1.5 * (a + b);
+                2e-6 + 4e-7 * (m + big + 1.0)
+                    + 4e-7 * big * (a * std::f64::consts::TAU / step / 8.0 + 3.0)
+            }
+        }
+    }
+
+    impl Shape32 {
+        /// The part's test ([`Inside::new`] of it) relative to the anchor `a`; `t`: bound
+        /// (pixels) of the error of the f32 sample positions and of this test's arithmetic.
+        fn of_part(part: &Prepared, a: [f64; 2], t: f64) -> Self {
+            let pair_sq = |r: f64| {
+                if r <= super::INSIDE_TOL {
+                    return [-1.0f32, -1.0];
+                }
+                let r = r - super::INSIDE_TOL;
+                let lo = if r > t { (r - t) * (r - t) } else { -1.0 };
+                [lo as f32, ((r + t) * (r + t)) as f32]
+            };
+            match *part {
+                Prepared::Circle { c, r } => Self::Disc {
+                    c: rel(c, a),
+                    r2: pair_sq(r),
+                },
+                Prepared::Capsule {
+                    c0,
+                    c1,
+                    r0,
+                    r1,
+                    len,
+                    d,
+                    n,
+                    sin_a,
+                    cos_a,
+                } => Self::Capsule {
+                    c0: rel(c0, a),
+                    c1: rel(c1, a),
+                    d: f32s(d),
+                    n: f32s(n),
+                    lo: pair(r0 * sin_a, t),
+                    hi: pair(len + r1 * sin_a, t),
+                    r0sq: pair_sq(r0),
+                    r1sq: pair_sq(r1),
+                    sin_a: sin_a as f32,
+                    cos_a: cos_a as f32,
+                    // |s·sin α + |t|·cos α| moves by at most √2 times the position error.
+                    lim: pair(r0 - super::INSIDE_TOL, 1.5 * t),
+                },
+                Prepared::Ellipse {
+                    c,
+                    a: ra,
+                    b,
+                    ea,
+                    eb,
+                } => {
+                    if b <= super::INSIDE_TOL {
+                        return Self::Never;
+                    }
+                    // Normalised coordinates move by at most 1/b ≥ 1/a times the error.
+                    let k = 1.0 - super::INSIDE_TOL / b;
+                    let tn = 1.5 * t / b;
+                    let lo = if k > tn { (k - tn) * (k - tn) } else { -1.0 };
+                    Self::Ellipse {
+                        c: rel(c, a),
+                        ea: f32s(ea / ra),
+                        eb: f32s(eb / b),
+                        k2: [lo as f32, ((k + tn) * (k + tn)) as f32],
+                    }
+                }
+            }
+        }
+    }
+
+    /// Window lengths (f32 values) of G for the loops without bounds checks.
+    const W18: usize = 1 << 18;
+    const W20: usize = 1 << 20;
+
+    /// The constants of one part's f32 loop: its occluders' tests and (shrunk, splat) boxes,
+    /// the anchor's index in the G window, the image bounds, and what the fallback needs.
+    struct PartLoop<'a, 'w, const W: usize> {
+        shapes: [&'a Shape32; 2],
+        boxes: [[f32x8; 4]; 2],
+        /// The occluders' boxes as f64, for the runs' test.
+        boxes64: [[f64; 4]; 2],
+        base: i32x8,
+        /// Rounded relative coordinates inside the image: `[−a, size − a)`.
+        bounds: [f32; 4],
+        win: &'w [f32; W],
+        ctx: &'a Ctx<'a>,
+        force_fallback: bool,
+    }
+
+    /// What the fallback needs to redo a chunk in f64: the parts, their boxes, the part and
+    /// the spacing, the image bounds of the f64 test.
+    struct Ctx<'p> {
+        parts: &'p Projected,
+        boxes: &'p [[f64; 4]; 3],
+        i: usize,
+        step: f64,
+        wh: [f64; 2],
+    }
+
+    /// The f32 loop fed by [`Prepared::sample_outline`]: each run is sampled as it comes.
+    struct Stream<'l, 'a, 'w, 'b, 'c, const INSIDE: bool, const NOCC: usize, const W: usize> {
+        simd: V3,
+        a: [f64; 2],
+        pl: &'l PartLoop<'a, 'w, W>,
+        acc: &'b mut Acc<'c>,
+        /// Index of the next run.
+        k: usize,
+    }
+
+    impl<const INSIDE: bool, const NOCC: usize, const W: usize> super::OutlineSink
+        for Stream<'_, '_, '_, '_, '_, INSIDE, NOCC, W>
+    {
+        #[allow(clippy::inline_always)]
+        #[inline(always)]
+        fn line(&mut self, p: Vector2<f64>, q: Vector2<f64>, n: usize) {
+            let run = Run32::line(self.a, p, q, n);
+            run_v3::<INSIDE, NOCC, W>(self.simd, &run, self.k, self.pl, self.acc);
+            self.k += 1;
+        }
+
+        #[allow(clippy::inline_always)]
+        #[inline(always)]
+        fn trig(
+            &mut self,
+            c: Vector2<f64>,
+            u: Vector2<f64>,
+            w: Vector2<f64>,
+            theta: f64,
+            n: usize,
+            circle: bool,
+        ) {
+            let run = Run32::trig(self.simd, self.a, c, u, w, theta, n, circle);
+            run_v3::<INSIDE, NOCC, W>(self.simd, &run, self.k, self.pl, self.acc);
+            self.k += 1;
+        }
     }
 
     impl pulp::NullaryFnOnce for Nearest<'_> {
@@ -1252,130 +1721,528 @@ mod avx2 {
             let parts = self.parts;
             let (wf, hf) = (f64::from(self.width) - 0.5, f64::from(self.height) - 0.5);
             let boxes = part_boxes(parts);
-            let mut shapes = [Inside::Never; 3];
+            let np = parts.n.min(3);
+            // One anchor for the whole pose: the rounded centre of the parts' boxes.
+            let mut ub = [
+                f64::INFINITY,
+                f64::INFINITY,
+                f64::NEG_INFINITY,
+                f64::NEG_INFINITY,
+            ];
+            for b in &boxes[..np] {
+                ub = [
+                    ub[0].min(b[0]),
+                    ub[1].min(b[1]),
+                    ub[2].max(b[2]),
+                    ub[3].max(b[3]),
+                ];
+            }
+            let a = [
+                (0.5 * (ub[0] + ub[2])).round(),
+                (0.5 * (ub[1] + ub[3])).round(),
+            ];
+            let m = inf(ub[2] - a[0], ub[3] - a[1]).max(inf(a[0] - ub[0], a[1] - ub[1]));
+            let mut t = 0.0f64;
+            for part in parts.iter() {
+                t = t.max(tolerance_bound(part, m, self.step));
+            }
+            let t = t + 2e-6 + 1e-6 * m;
+            let mut shapes = [Shape32::Never; 3];
             for (sh, part) in shapes.iter_mut().zip(parts.iter()) {
-                *sh = Inside::new(part);
+                *sh = Shape32::of_part(part, a, t);
             }
             let mut acc = Acc {
                 simd: s,
                 data: self.data,
                 stride: s.splat_f64s(self.stride as f64),
+                stride_i: pulp::cast([self.stride as i32; L8]),
                 sum: s.splat_f64s(0.0),
-                count: s.splat_f64s(0.0),
+                n: 0,
             };
+            let overlap = |a: &[f64; 4], b: &[f64; 4]| {
+                a[0] <= b[2] && b[0] <= a[2] && a[1] <= b[3] && b[1] <= a[3]
+            };
+            let base = (a[1] * self.stride as f64 + a[0]) as i32;
+            let bounds = [
+                -a[0] as f32,
+                -a[1] as f32,
+                (f64::from(self.width) - a[0]) as f32,
+                (f64::from(self.height) - a[1]) as f32,
+            ];
             for (i, part) in parts.iter().enumerate() {
-                let Some((occ, inside)) = occluders(parts.n, &boxes, &shapes, i, wf, hf) else {
+                // As `occluders`: the part's box in the image, inside it, the overlapping parts.
+                let bb = boxes[i];
+                if bb[2] < -0.5 || bb[3] < -0.5 || bb[0] >= wf || bb[1] >= hf {
                     continue;
+                }
+                let mg = super::INSIDE_MARGIN;
+                let inside =
+                    bb[0] - mg >= -0.5 && bb[1] - mg >= -0.5 && bb[2] + mg < wf && bb[3] + mg < hf;
+                let (mut oi, mut no) = ([0usize; 2], 0);
+                for k in 0..np {
+                    if k != i && no < 2 && overlap(&bb, &boxes[k]) {
+                        oi[no] = k;
+                        no += 1;
+                    }
+                }
+                let ctx = Ctx {
+                    parts,
+                    boxes: &boxes,
+                    i,
+                    step: self.step,
+                    wh: [wf, hf],
                 };
-                let (runs, nr) = part.sample_runs(self.step);
-                let (r, a) = (&runs[..nr], &mut acc);
-                match (inside, occ.n) {
-                    (true, 0) => runs_v3::<true, 0>(r, &occ, wf, hf, a),
-                    (true, 1) => runs_v3::<true, 1>(r, &occ, wf, hf, a),
-                    (true, _) => runs_v3::<true, 2>(r, &occ, wf, hf, a),
-                    (false, 0) => runs_v3::<false, 0>(r, &occ, wf, hf, a),
-                    (false, 1) => runs_v3::<false, 1>(r, &occ, wf, hf, a),
-                    (false, _) => runs_v3::<false, 2>(r, &occ, wf, hf, a),
+                // The rows the part's samples may round to, and a window of G of a power-of-two
+                // length that holds them: the reads need no bounds checks (index & (len − 1)).
+                let y0 = (bb[1] - 1.0).floor().max(0.0);
+                let y1 = (bb[3] + 2.0).floor().min(f64::from(self.height));
+                let rows = (y1 - y0).max(0.0) * self.stride as f64;
+                let lo = y0 as usize * self.stride;
+                let fits = |w: usize| self.data.len() >= w && rows <= w as f64;
+                let shrink = |k: usize| {
+                    let b = &boxes[oi[k]];
+                    [
+                        (b[0] - a[0] + 0.4),
+                        (b[1] - a[1] + 0.4),
+                        (b[2] - a[0] - 0.4),
+                        (b[3] - a[1] - 0.4),
+                    ]
+                };
+                let b64 = [shrink(0), shrink(1)];
+                let sp = |b: &[f64; 4]| b.map(|x| s.splat_f32s(x as f32));
+                macro_rules! go {
+                    ($w:expr) => {{
+                        let start = lo.min(self.data.len() - $w);
+                        let win: &[f32; $w] = self.data[start..start + $w].try_into().unwrap();
+                        let pl = PartLoop {
+                            shapes: [&shapes[oi[0]], &shapes[oi[1]]],
+                            boxes: [sp(&b64[0]), sp(&b64[1])],
+                            boxes64: b64,
+                            base: pulp::cast([base - start as i32; L8]),
+                            bounds,
+                            win,
+                            ctx: &ctx,
+                            force_fallback: self.force_fallback,
+                        };
+                        match (inside, no) {
+                            (true, 0) => stream::<true, 0, { $w }>(s, part, a, &pl, &mut acc),
+                            (true, 1) => stream::<true, 1, { $w }>(s, part, a, &pl, &mut acc),
+                            (true, _) => stream::<true, 2, { $w }>(s, part, a, &pl, &mut acc),
+                            (false, 0) => stream::<false, 0, { $w }>(s, part, a, &pl, &mut acc),
+                            (false, 1) => stream::<false, 1, { $w }>(s, part, a, &pl, &mut acc),
+                            (false, _) => stream::<false, 2, { $w }>(s, part, a, &pl, &mut acc),
+                        }
+                    }};
+                }
+                if fits(W18) {
+                    go!(W18);
+                } else if fits(W20) {
+                    go!(W20);
+                } else {
+                    // Small images or parts taller than the windows: the f64 loop.
+                    let (e2, k) = part_f64(s, &ctx, &acc);
+                    acc.sum = e2;
+                    acc.n += k;
                 }
             }
             let sum: [f64; LANES] = pulp::cast(acc.sum);
-            let count: [f64; LANES] = pulp::cast(acc.count);
-            (
-                (sum[0] + sum[1]) + (sum[2] + sum[3]),
-                ((count[0] + count[1]) + (count[2] + count[3])) as usize,
-            )
+            ((sum[0] + sum[1]) + (sum[2] + sum[3]), acc.n)
         }
     }
 
+    /// Samples `part` into the f32 loop.
     #[allow(clippy::inline_always)]
     #[inline(always)]
-    fn runs_v3<const INSIDE: bool, const NOCC: usize>(
-        runs: &[Run],
-        occ: &Occluders<'_>,
-        wf: f64,
-        hf: f64,
+    fn stream<const INSIDE: bool, const NOCC: usize, const W: usize>(
+        s: V3,
+        part: &Prepared,
+        a: [f64; 2],
+        pl: &PartLoop<'_, '_, W>,
         acc: &mut Acc<'_>,
     ) {
-        let s = acc.simd;
-        let four = s.splat_f64s(LANES as f64);
-        let all: m64x4 = pulp::cast([u64::MAX; LANES]);
-        for run in runs {
-            let (full, tail) = (run.len() / LANES, run.len() % LANES);
-            let tail_ok: m64x4 =
-                pulp::cast([0, 1, 2, 3].map(|l| if l < tail { u64::MAX } else { 0 }));
-            match *run {
-                Run::Line { p, s: st, .. } => {
-                    let (px, py) = (s.splat_f64s(p.x), s.splat_f64s(p.y));
-                    let (sx, sy) = (s.splat_f64s(st.x), s.splat_f64s(st.y));
-                    let mut k = f64x4(0.0, 1.0, 2.0, 3.0);
-                    for _ in 0..full {
-                        let u = s.add_f64s(px, s.mul_f64s(k, sx));
-                        let v = s.add_f64s(py, s.mul_f64s(k, sy));
-                        chunk::<INSIDE, NOCC>(u, v, all, occ, wf, hf, acc);
-                        k = s.add_f64s(k, four);
-                    }
-                    if tail > 0 {
-                        let u = s.add_f64s(px, s.mul_f64s(k, sx));
-                        let v = s.add_f64s(py, s.mul_f64s(k, sy));
-                        chunk::<INSIDE, NOCC>(u, v, tail_ok, occ, wf, hf, acc);
-                    }
-                }
-                Run::Arc {
-                    c, rx, ry, cl, sl, ..
-                } => {
-                    let (cx, cy) = (s.splat_f64s(c.x), s.splat_f64s(c.y));
-                    let (cl, sl) = (s.splat_f64s(cl), s.splat_f64s(sl));
-                    let mut rx: f64x4 = pulp::cast(rx);
-                    let mut ry: f64x4 = pulp::cast(ry);
-                    for _ in 0..full {
-                        chunk::<INSIDE, NOCC>(
-                            s.add_f64s(cx, rx),
-                            s.add_f64s(cy, ry),
-                            all,
+        let mut st = Stream::<INSIDE, NOCC, W> {
+            simd: s,
+            a,
+            pl,
+            acc,
+            k: 0,
+        };
+        part.sample_outline(pl.ctx.step, &mut st);
+    }
+
+    /// The f64 occluders of the context's part (as the portable sampler has them).
+    fn with_occluders<R>(c: &Ctx<'_>, f: impl FnOnce(&Occluders<'_>) -> R) -> R {
+        let mut shapes = [Inside::Never; 3];
+        for (sh, part) in shapes.iter_mut().zip(c.parts.iter()) {
+            *sh = Inside::new(part);
+        }
+        let (occ, _) = occluders(c.parts.n, c.boxes, &shapes, c.i, c.wh[0], c.wh[1])
+            .expect("the part is in the image");
+        f(&occ)
+    }
+
+    /// The whole part by the f64 loop (sum continued from `acc.sum`, count of its samples).
+    #[allow(clippy::inline_always)]
+    #[inline(always)]
+    fn part_f64(s: V3, c: &Ctx<'_>, acc: &Acc<'_>) -> (f64x4, usize) {
+        let part = c.parts.iter().nth(c.i).expect("part");
+        let (runs, nr) = part.sample_runs(c.step);
+        with_occluders(c, |occ| {
+            let (mut sum, mut n) = (acc.sum, 0);
+            for run in &runs[..nr] {
+                run.for_each_chunk(
+                    #[inline(always)]
+                    |u, v, ok| {
+                        let ok: m64x4 = pulp::cast(ok.map(|b| if b { u64::MAX } else { 0 }));
+                        let (e2, k) = chunk::<false, 2>(
+                            pulp::cast(u),
+                            pulp::cast(v),
+                            ok,
                             occ,
-                            wf,
-                            hf,
+                            c.wh[0],
+                            c.wh[1],
                             acc,
                         );
-                        (rx, ry) = (
-                            s.add_f64s(s.mul_f64s(cl, rx), s.mul_f64s(sl, ry)),
-                            s.sub_f64s(s.mul_f64s(cl, ry), s.mul_f64s(sl, rx)),
-                        );
-                    }
-                    if tail > 0 {
-                        let (u, v) = (s.add_f64s(cx, rx), s.add_f64s(cy, ry));
-                        chunk::<INSIDE, NOCC>(u, v, tail_ok, occ, wf, hf, acc);
-                    }
+                        sum = s.add_f64s(sum, e2);
+                        n += k;
+                    },
+                );
+            }
+            (sum, n)
+        })
+    }
+
+    /// The f32 positions of `run`'s samples relative to the anchor, eight per chunk (the
+    /// chunk's lanes hold samples `8j + l`; lanes past the run are set too), passed to `f`
+    /// with the chunk index and whether it is the tail chunk.
+    #[allow(clippy::inline_always)]
+    #[inline(always)]
+    fn for_each_chunk32<F: FnMut(usize, f32x8, f32x8, bool)>(s: V3, run: &Run32, mut f: F) {
+        let (full, tail) = (run.n / L8, run.n % L8);
+        let sp = |x: f32| s.splat_f32s(x);
+        match run.samples {
+            Gen32::Line { p, s: st } => {
+                let (px, py) = (sp(p[0]), sp(p[1]));
+                let (sx, sy) = (sp(st[0]), sp(st[1]));
+                let eight = s.splat_f32s(L8 as f32);
+                let mut k = f32x8(0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0);
+                for j in 0..full {
+                    f(
+                        j,
+                        s.mul_add_e_f32s(k, sx, px),
+                        s.mul_add_e_f32s(k, sy, py),
+                        false,
+                    );
+                    k = s.add_f32s(k, eight);
                 }
-                Run::Trig {
-                    c,
-                    u,
-                    w,
-                    co,
-                    si,
-                    cl,
-                    sl,
-                    ..
-                } => {
-                    let (cx, cy) = (s.splat_f64s(c.x), s.splat_f64s(c.y));
-                    let (ux, uy) = (s.splat_f64s(u.x), s.splat_f64s(u.y));
-                    let (wx, wy) = (s.splat_f64s(w.x), s.splat_f64s(w.y));
-                    let (cl, sl) = (s.splat_f64s(cl), s.splat_f64s(sl));
-                    let mut co: f64x4 = pulp::cast(co);
-                    let mut si: f64x4 = pulp::cast(si);
-                    for k in 0..full + usize::from(tail > 0) {
-                        let x = s.add_f64s(s.add_f64s(cx, s.mul_f64s(ux, co)), s.mul_f64s(wx, si));
-                        let y = s.add_f64s(s.add_f64s(cy, s.mul_f64s(uy, co)), s.mul_f64s(wy, si));
-                        let ok = if k < full { all } else { tail_ok };
-                        chunk::<INSIDE, NOCC>(x, y, ok, occ, wf, hf, acc);
-                        (co, si) = (
-                            s.sub_f64s(s.mul_f64s(co, cl), s.mul_f64s(si, sl)),
-                            s.add_f64s(s.mul_f64s(si, cl), s.mul_f64s(co, sl)),
-                        );
-                    }
+                if tail > 0 {
+                    f(
+                        full,
+                        s.mul_add_e_f32s(k, sx, px),
+                        s.mul_add_e_f32s(k, sy, py),
+                        true,
+                    );
+                }
+            }
+            Gen32::Arc {
+                c,
+                mut rx,
+                mut ry,
+                c8,
+                s8,
+            } => {
+                let (cx, cy) = (sp(c[0]), sp(c[1]));
+                let (c8, s8, ns8) = (sp(c8), sp(s8), sp(-s8));
+                for j in 0..full {
+                    f(j, s.add_f32s(cx, rx), s.add_f32s(cy, ry), false);
+                    (rx, ry) = (
+                        s.mul_add_e_f32s(c8, rx, s.mul_f32s(s8, ry)),
+                        s.mul_add_e_f32s(c8, ry, s.mul_f32s(ns8, rx)),
+                    );
+                }
+                if tail > 0 {
+                    f(full, s.add_f32s(cx, rx), s.add_f32s(cy, ry), true);
+                }
+            }
+            Gen32::Trig {
+                c,
+                u,
+                w,
+                mut co,
+                mut si,
+                c8,
+                s8,
+            } => {
+                let (cx, cy) = (sp(c[0]), sp(c[1]));
+                let (ux, uy, wx, wy) = (sp(u[0]), sp(u[1]), sp(w[0]), sp(w[1]));
+                let (c8, s8, ns8) = (sp(c8), sp(s8), sp(-s8));
+                for j in 0..full {
+                    let x = s.mul_add_e_f32s(ux, co, s.mul_add_e_f32s(wx, si, cx));
+                    let y = s.mul_add_e_f32s(uy, co, s.mul_add_e_f32s(wy, si, cy));
+                    f(j, x, y, false);
+                    (co, si) = (
+                        s.mul_add_e_f32s(co, c8, s.mul_f32s(si, ns8)),
+                        s.mul_add_e_f32s(si, c8, s.mul_f32s(co, s8)),
+                    );
+                }
+                if tail > 0 {
+                    let x = s.mul_add_e_f32s(ux, co, s.mul_add_e_f32s(wx, si, cx));
+                    let y = s.mul_add_e_f32s(uy, co, s.mul_add_e_f32s(wy, si, cy));
+                    f(full, x, y, true);
                 }
             }
         }
+    }
+
+    /// The f64 positions of the four samples `4q … 4q + 3` of `run`: those of the f64 loop
+    /// (the portable sampler's operations, the rotations repeated `q` times).
+    #[allow(clippy::inline_always)]
+    #[inline(always)]
+    fn chunk64(s: V3, run: &Run, q: usize) -> (f64x4, f64x4) {
+        match *run {
+            Run::Line { p, s: st, .. } => {
+                let b = (LANES * q) as f64;
+                let k = f64x4(b, b + 1.0, b + 2.0, b + 3.0);
+                (
+                    s.add_f64s(s.splat_f64s(p.x), s.mul_f64s(k, s.splat_f64s(st.x))),
+                    s.add_f64s(s.splat_f64s(p.y), s.mul_f64s(k, s.splat_f64s(st.y))),
+                )
+            }
+            Run::Arc {
+                c, rx, ry, cl, sl, ..
+            } => {
+                let (cl, sl) = (s.splat_f64s(cl), s.splat_f64s(sl));
+                let mut rx: f64x4 = pulp::cast(rx);
+                let mut ry: f64x4 = pulp::cast(ry);
+                for _ in 0..q {
+                    (rx, ry) = (
+                        s.add_f64s(s.mul_f64s(cl, rx), s.mul_f64s(sl, ry)),
+                        s.sub_f64s(s.mul_f64s(cl, ry), s.mul_f64s(sl, rx)),
+                    );
+                }
+                (
+                    s.add_f64s(s.splat_f64s(c.x), rx),
+                    s.add_f64s(s.splat_f64s(c.y), ry),
+                )
+            }
+            Run::Trig {
+                c,
+                u,
+                w,
+                co,
+                si,
+                cl,
+                sl,
+                ..
+            } => {
+                let (cl, sl) = (s.splat_f64s(cl), s.splat_f64s(sl));
+                let mut co: f64x4 = pulp::cast(co);
+                let mut si: f64x4 = pulp::cast(si);
+                for _ in 0..q {
+                    (co, si) = (
+                        s.sub_f64s(s.mul_f64s(co, cl), s.mul_f64s(si, sl)),
+                        s.add_f64s(s.mul_f64s(si, cl), s.mul_f64s(co, sl)),
+                    );
+                }
+                let sp = |x: f64| s.splat_f64s(x);
+                (
+                    s.add_f64s(
+                        s.add_f64s(sp(c.x), s.mul_f64s(sp(u.x), co)),
+                        s.mul_f64s(sp(w.x), si),
+                    ),
+                    s.add_f64s(
+                        s.add_f64s(sp(c.y), s.mul_f64s(sp(u.y), co)),
+                        s.mul_f64s(sp(w.y), si),
+                    ),
+                )
+            }
+        }
+    }
+
+    /// The f64 loop's two chunks of four samples for the f32 chunk `j` of a run, when one of
+    /// its decisions was too close to call in f32 (rare): compiled once, out of the f32 loops.
+    struct Fallback<'c, 'p, 'a, 'b> {
+        ctx: &'c Ctx<'p>,
+        /// The run (index among the part's runs) and its f32 chunk.
+        run: usize,
+        j: usize,
+        acc: &'a Acc<'b>,
+    }
+
+    impl pulp::NullaryFnOnce for Fallback<'_, '_, '_, '_> {
+        /// The two chunks' `(1 − G)²` (zero in lanes without a sample) and their count.
+        type Output = ([f64x4; 2], usize);
+
+        #[allow(clippy::inline_always)]
+        #[inline(always)]
+        fn call(self) -> ([f64x4; 2], usize) {
+            let s = self.acc.simd;
+            let c = self.ctx;
+            let part = c.parts.iter().nth(c.i).expect("part");
+            let (runs, _) = part.sample_runs(c.step);
+            let run = &runs[self.run];
+            let n = run.len();
+            with_occluders(c, |occ| {
+                let mut out = ([s.splat_f64s(0.0); 2], 0);
+                for (h, q) in [2 * self.j, 2 * self.j + 1].into_iter().enumerate() {
+                    if LANES * q >= n {
+                        break;
+                    }
+                    let (u, v) = chunk64(s, run, q);
+                    let ok: m64x4 = pulp::cast(core::array::from_fn::<u64, LANES, _>(|l| {
+                        if LANES * q + l < n { u64::MAX } else { 0 }
+                    }));
+                    // Two occluder slots (an unused one holds an empty box) and the image
+                    // test: the same decisions as the specialised f64 loops.
+                    let (e2, k) = chunk::<false, 2>(u, v, ok, occ, c.wh[0], c.wh[1], self.acc);
+                    out.0[h] = e2;
+                    out.1 += k;
+                }
+                out
+            })
+        }
+    }
+
+    /// Runs the [`Fallback`] out of line (compiled once with AVX2, by pulp).
+    #[inline(never)]
+    fn fallback(f: Fallback<'_, '_, '_, '_>) -> ([f64x4; 2], usize) {
+        let s = f.acc.simd;
+        s.vectorize(f)
+    }
+
+    /// The f32 sample loop over one run. Per chunk of eight samples: the rounded pixel, the
+    /// image test (unless `INSIDE`), the occluder tests; a chunk with a decision within the
+    /// error bound of flipping is redone by the f64 loop ([`Fallback`]), so the same samples
+    /// pass as in the portable f64 sampler, and their `(1 − G)²` are summed in the same lanes
+    /// and order (lanes 0–3 are the f64 loop's chunk 2j, lanes 4–7 its chunk 2j + 1).
+    #[allow(clippy::inline_always)]
+    #[inline(always)]
+    fn run_v3<const INSIDE: bool, const NOCC: usize, const W: usize>(
+        s: V3,
+        run: &Run32,
+        ri: usize,
+        pl: &PartLoop<'_, '_, W>,
+        out: &mut Acc<'_>,
+    ) {
+        let lane = i32x8(0, 1, 2, 3, 4, 5, 6, 7);
+        let one = s.splat_f32s(1.0);
+        let all: m32x8 = pulp::cast([u32::MAX; L8]);
+        let (n, tol) = (run.n, run.tol);
+        // The sums in registers (the fallback gets no pointer to them). Every sample counts
+        // unless a test below drops it.
+        let (mut sum, mut count) = (out.sum, out.n + n);
+        let acc = &*out;
+        let half = s.splat_f32s(if pl.force_fallback {
+            -1.0
+        } else {
+            (0.5 - tol) as f32
+        });
+        let tail_ok: m32x8 = pulp::cast(
+            s.avx2
+                ._mm256_cmpgt_epi32(pulp::cast([(n % L8) as i32; L8]), pulp::cast(lane)),
+        );
+        // The occluders whose (shrunk) box the run's box meets.
+        let rb = run.bx;
+        let meets = |b: &[f64; 4]| b[0] <= rb[2] && rb[0] <= b[2] && b[1] <= rb[3] && rb[1] <= b[3];
+        let use_occ = [
+            NOCC >= 1 && meets(&pl.boxes64[0]),
+            NOCC >= 2 && meets(&pl.boxes64[1]),
+        ];
+        let wmask: i32x8 = pulp::cast([(W - 1) as u32; L8]);
+        let (win, base) = (pl.win, pl.base);
+        for_each_chunk32(
+            s,
+            run,
+            #[inline(always)]
+            |j, u, v, is_tail| {
+                // Lanes holding a sample of the run.
+                let mut ok = if is_tail { tail_ok } else { all };
+                let mut dropped = is_tail;
+                let (ru, rv) = (s.round_f32x8(u), s.round_f32x8(v));
+                // |x − round(x)| near ½: the f64 rounding may go either way.
+                let du = s.abs_f32s(s.sub_f32s(u, ru));
+                let dv = s.abs_f32s(s.sub_f32s(v, rv));
+                let mut amb = s.and_m32s(ok, s.greater_than_f32s(s.max_f32s(du, dv), half));
+                if !INSIDE {
+                    let b = pl.bounds;
+                    let inx = s.and_m32s(
+                        s.greater_than_or_equal_f32s(ru, s.splat_f32s(b[0])),
+                        s.less_than_f32s(ru, s.splat_f32s(b[2])),
+                    );
+                    let iny = s.and_m32s(
+                        s.greater_than_or_equal_f32s(rv, s.splat_f32s(b[1])),
+                        s.less_than_f32s(rv, s.splat_f32s(b[3])),
+                    );
+                    let inside = s.and_m32s(ok, s.and_m32s(inx, iny));
+                    count -= (bits(s, ok) ^ bits(s, inside)).count_ones() as usize;
+                    ok = inside;
+                    dropped = true;
+                }
+                for k in 0..NOCC {
+                    if !use_occ[k] {
+                        continue;
+                    }
+                    let ob = &pl.boxes[k];
+                    let inx = s.and_m32s(
+                        s.greater_than_or_equal_f32s(u, ob[0]),
+                        s.less_than_or_equal_f32s(u, ob[2]),
+                    );
+                    let iny = s.and_m32s(
+                        s.greater_than_or_equal_f32s(v, ob[1]),
+                        s.less_than_or_equal_f32s(v, ob[3]),
+                    );
+                    if bits(s, s.and_m32s(ok, s.and_m32s(inx, iny))) != 0 {
+                        let (deep, out) = pl.shapes[k].test(s, u, v);
+                        amb = s.or_m32s(amb, s.and_m32s(ok, s.not_m32s(s.or_m32s(deep, out))));
+                        let drop = s.and_m32s(ok, deep);
+                        count -= bits(s, drop).count_ones() as usize;
+                        ok = s.and_m32s(ok, s.not_m32s(deep));
+                        dropped = true;
+                    }
+                }
+                if bits(s, amb) != 0 {
+                    // Undo this chunk's count; the f64 loop counts it.
+                    count -= bits(s, ok).count_ones() as usize;
+                    let ([lo, hi], k) = fallback(Fallback {
+                        ctx: pl.ctx,
+                        run: ri,
+                        j,
+                        acc,
+                    });
+                    sum = s.add_f64s(s.add_f64s(sum, lo), hi);
+                    count += k;
+                    return;
+                }
+                let px = s.avx._mm256_cvttps_epi32(pulp::cast(ru));
+                let py = s.avx._mm256_cvttps_epi32(pulp::cast(rv));
+                let idx = s.avx2._mm256_add_epi32(
+                    s.avx2._mm256_add_epi32(
+                        s.avx2._mm256_mullo_epi32(py, pulp::cast(acc.stride_i)),
+                        px,
+                    ),
+                    pulp::cast(base),
+                );
+                // Lanes that passed are in the window; the others read some G in it, which
+                // is dropped.
+                let idx: [u32; L8] = pulp::cast(s.avx2._mm256_and_si256(idx, pulp::cast(wmask)));
+                let at = |l: usize| win[idx[l] as usize & (W - 1)];
+                let g = f32x8(at(0), at(1), at(2), at(3), at(4), at(5), at(6), at(7));
+                // Lanes without a sample read G = 1, i.e. add (1 − 1)² = +0, as the f64 loop.
+                let g = if dropped {
+                    s.select_f32s(ok, g, one)
+                } else {
+                    g
+                };
+                let [lo, hi]: [f32x4; 2] = pulp::cast(g);
+                let c = s.splat_f64s(1.0);
+                let e = s.sub_f64s(c, s.convert_f32x4_to_f64x4(lo));
+                sum = s.add_f64s(sum, s.mul_f64s(e, e));
+                let e = s.sub_f64s(c, s.convert_f32x4_to_f64x4(hi));
+                sum = s.add_f64s(sum, s.mul_f64s(e, e));
+            },
+        );
+        out.sum = sum;
+        out.n = count;
     }
 
     #[allow(clippy::inline_always, clippy::too_many_arguments)]
@@ -1387,8 +2254,8 @@ mod avx2 {
         occ: &Occluders<'_>,
         wf: f64,
         hf: f64,
-        acc: &mut Acc<'_>,
-    ) {
+        acc: &Acc<'_>,
+    ) -> (f64x4, usize) {
         let s = acc.simd;
         let mut ok = ok;
         if !INSIDE {
@@ -1437,8 +2304,8 @@ mod avx2 {
             d[idx[3] as usize],
         ));
         let e = s.sub_f64s(s.splat_f64s(1.0), g);
-        acc.sum = s.add_f64s(acc.sum, s.select_f64s(ok, s.mul_f64s(e, e), zero));
-        acc.count = s.add_f64s(acc.count, s.select_f64s(ok, s.splat_f64s(1.0), zero));
+        let n = s.avx._mm256_movemask_pd(pulp::cast(ok)).count_ones() as usize;
+        (s.select_f64s(ok, s.mul_f64s(e, e), zero), n)
     }
 
     /// [`Inside::deep`] on four lanes.
@@ -1497,6 +2364,257 @@ mod avx2 {
             }
         }
     }
+    #[cfg(test)]
+    mod tests {
+        use nalgebra::Vector3;
+        use rand::{Rng, SeedableRng};
+
+        use super::*;
+        use crate::{ArmGeometry, Camera, contour::project_prepared};
+
+        /// Random poses around the arm's rest pose, seen by cameras from far to close (parts
+        /// from a few pixels to a few hundred across), at 640×480 and 1920×1080.
+        fn scenes() -> Vec<(Camera, [f64; 9])> {
+            let g = ArmGeometry::default();
+            let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(11);
+            let mut out = Vec::new();
+            for &(w, h) in &[(640u32, 480u32), (1920, 1080)] {
+                for &dist in &[0.6, 1.0, 1.8, 4.0] {
+                    let eye = Vector3::new(0.1, -dist, 1.3);
+                    let c =
+                        Camera::look_at(eye, Vector3::new(0.1, 0.3, 1.0), Vector3::z(), w, h, 1.0)
+                            .unwrap();
+                    for _ in 0..40 {
+                        let mut p = [0.2, 0.0, 1.2, 0.3, 0.15, 0.95, 0.25, 0.55, 0.8];
+                        for x in &mut p[3..] {
+                            *x += rng.random_range(-0.2..0.2);
+                        }
+                        crate::correct_arm(&g, &mut p, None);
+                        out.push((c.clone(), p));
+                    }
+                }
+            }
+            out
+        }
+
+        #[test]
+        fn f32_positions_are_within_the_bound() {
+            // The f32 loop relies on its samples being within `tol` of the f64 samples (less
+            // the anchor): check with a margin of 4 over many runs of every kind.
+            let Some(s) = V3::try_new() else {
+                return;
+            };
+            let g = ArmGeometry::default();
+            let (mut worst, mut checked) = (0.0f64, 0usize);
+            for (cam, pose) in scenes() {
+                let parts = project_prepared(&cam, &g, &pose);
+                for part in parts.iter() {
+                    let bb = part.bbox();
+                    let a = [
+                        (0.5 * (bb[0] + bb[2])).round() + 37.0,
+                        (0.5 * (bb[1] + bb[3])).round() - 21.0,
+                    ];
+                    let mut sink = Collect {
+                        simd: s,
+                        a,
+                        runs: Vec::new(),
+                    };
+                    s.vectorize(Outline {
+                        part,
+                        sink: &mut sink,
+                    });
+                    let (runs, nr) = part.sample_runs(2.0);
+                    assert_eq!(nr, sink.runs.len());
+                    for (run, r32) in runs[..nr].iter().zip(&sink.runs) {
+                        assert_eq!(run.len(), r32.n);
+                        let mut exact = Vec::new();
+                        run.for_each(|x| exact.push(x));
+                        let mut got = Vec::new();
+                        s.vectorize(Positions {
+                            run: r32,
+                            out: &mut got,
+                        });
+                        for (k, x) in exact.iter().enumerate() {
+                            let (u, v) = got[k];
+                            let e = (f64::from(u) - (x.x - a[0]))
+                                .abs()
+                                .max((f64::from(v) - (x.y - a[1])).abs());
+                            worst = worst.max(e / r32.tol);
+                            checked += 1;
+                        }
+                        let b = r32.bx;
+                        for x in &exact {
+                            let (u, v) = (x.x - a[0], x.y - a[1]);
+                            assert!(b[0] <= u && u <= b[2] && b[1] <= v && v <= b[3]);
+                        }
+                    }
+                }
+            }
+            assert!(checked > 100_000, "{checked}");
+            assert!(worst < 0.25, "error / bound up to {worst}");
+        }
+
+        #[test]
+        fn f32_loop_and_its_fallback_give_the_f64_sums() {
+            // Every chunk through the f64 fallback, the f32 loop (which falls back only near
+            // rounding or inside-test boundaries) and the portable f64 loop: the same points
+            // and the same sums, bit for bit, for parts from tiny to larger than the G windows,
+            // inside and cut by the image border.
+            let g = ArmGeometry::default();
+            let (mut n, mut total) = (0usize, 0usize);
+            for (cam, pose) in scenes() {
+                let (w, h) = (cam.width, cam.height);
+                let data: Vec<f32> = (0..w as usize * h as usize)
+                    .map(|i| ((i * 37) % 101) as f32 / 100.0)
+                    .collect();
+                let parts = project_prepared(&cam, &g, &pose);
+                let fast =
+                    crate::contour::analytic_sum_nearest(&parts, w, h, 2.0, &data, w as usize);
+                let Some(slow) = crate::contour::analytic_sum_nearest_by_fallback(
+                    &parts, w, h, 2.0, &data, w as usize,
+                ) else {
+                    return;
+                };
+                let portable = crate::contour::analytic_sum(
+                    &parts,
+                    w,
+                    h,
+                    2.0,
+                    crate::contour::nearest_cost(&data, w as usize),
+                );
+                assert_eq!((fast.0.to_bits(), fast.1), (slow.0.to_bits(), slow.1));
+                assert_eq!(
+                    (fast.0.to_bits(), fast.1),
+                    (portable.0.to_bits(), portable.1)
+                );
+                n += usize::from(fast.1 > 0);
+                total += fast.1;
+            }
+            assert!(n > 300 && total > 100_000, "{n} {total}");
+        }
+
+        #[test]
+        fn f32_inside_test_is_sure_only_when_the_f64_test_agrees() {
+            let Some(s) = V3::try_new() else {
+                return;
+            };
+            let g = ArmGeometry::default();
+            let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(3);
+            let (mut sure, mut unsure) = (0usize, 0usize);
+            for (cam, pose) in scenes().into_iter().step_by(7) {
+                let parts = project_prepared(&cam, &g, &pose);
+                for part in parts.iter() {
+                    let bb = part.bbox();
+                    let a = [
+                        (0.5 * (bb[0] + bb[2])).round() - 3.0,
+                        (0.5 * (bb[1] + bb[3])).round() + 5.0,
+                    ];
+                    let shape = Inside::new(part);
+                    let t = 1e-4;
+                    let s32 = Shape32::of_part(part, a, t);
+                    for _ in 0..200 {
+                        let x: [f64; L8] =
+                            core::array::from_fn(|_| rng.random_range(bb[0] - 2.0..bb[2] + 2.0));
+                        let y: [f64; L8] =
+                            core::array::from_fn(|_| rng.random_range(bb[1] - 2.0..bb[3] + 2.0));
+                        let (u, v) = (x.map(|x| (x - a[0]) as f32), y.map(|y| (y - a[1]) as f32));
+                        let (deep, out) = s.vectorize(Test { s32: &s32, u, v });
+                        for l in 0..L8 {
+                            let d64 = shape.deep([x[l]; LANES], [y[l]; LANES])[0];
+                            if deep[l] {
+                                assert!(d64, "{x:?} {y:?} {l}");
+                            }
+                            if out[l] {
+                                assert!(!d64, "{x:?} {y:?} {l}");
+                            }
+                            assert!(!(deep[l] && out[l]));
+                            if deep[l] || out[l] {
+                                sure += 1;
+                            } else {
+                                unsure += 1;
+                            }
+                        }
+                    }
+                }
+            }
+            assert!(sure > 100_000 && unsure * 1000 < sure, "{sure} {unsure}");
+        }
+
+        struct Test<'a> {
+            s32: &'a Shape32,
+            u: [f32; L8],
+            v: [f32; L8],
+        }
+
+        impl pulp::NullaryFnOnce for Test<'_> {
+            type Output = ([bool; L8], [bool; L8]);
+            #[allow(clippy::inline_always)]
+            #[inline(always)]
+            fn call(self) -> Self::Output {
+                let s = V3::try_new().unwrap();
+                let (d, o) = self.s32.test(s, pulp::cast(self.u), pulp::cast(self.v));
+                let (d, o): ([u32; L8], [u32; L8]) = (pulp::cast(d), pulp::cast(o));
+                (d.map(|x| x != 0), o.map(|x| x != 0))
+            }
+        }
+
+        /// The f32 runs of a part.
+        struct Collect {
+            simd: V3,
+            a: [f64; 2],
+            runs: Vec<Run32>,
+        }
+
+        impl crate::contour::OutlineSink for Collect {
+            fn line(&mut self, p: Vector2<f64>, q: Vector2<f64>, n: usize) {
+                self.runs.push(Run32::line(self.a, p, q, n));
+            }
+            fn trig(
+                &mut self,
+                c: Vector2<f64>,
+                u: Vector2<f64>,
+                w: Vector2<f64>,
+                theta: f64,
+                n: usize,
+                circle: bool,
+            ) {
+                self.runs
+                    .push(Run32::trig(self.simd, self.a, c, u, w, theta, n, circle));
+            }
+        }
+
+        struct Outline<'a> {
+            part: &'a Prepared,
+            sink: &'a mut Collect,
+        }
+
+        impl pulp::NullaryFnOnce for Outline<'_> {
+            type Output = ();
+            #[allow(clippy::inline_always)]
+            #[inline(always)]
+            fn call(self) {
+                self.part.sample_outline(2.0, self.sink);
+            }
+        }
+
+        struct Positions<'a> {
+            run: &'a Run32,
+            out: &'a mut Vec<(f32, f32)>,
+        }
+
+        impl pulp::NullaryFnOnce for Positions<'_> {
+            type Output = ();
+            #[allow(clippy::inline_always)]
+            #[inline(always)]
+            fn call(self) {
+                let s = V3::try_new().unwrap();
+                for_each_chunk32(s, self.run, |_, u, v, _| {
+                    let (u, v): ([f32; L8], [f32; L8]) = (pulp::cast(u), pulp::cast(v));
+                    self.out.extend(u.iter().zip(&v).map(|(&a, &b)| (a, b)));
+                });
+            }
+        }
+    }
 }
 
 /// `Σ (1 − G(c))²` over the analytic contour samples `c` at their rounded pixels (`data`:
@@ -1521,9 +2639,34 @@ pub(crate) fn analytic_sum_nearest(
             step,
             data,
             stride,
+            force_fallback: false,
         });
     }
     analytic_sum(parts, width, height, step, nearest_cost(data, stride))
+}
+
+/// [`analytic_sum_nearest`] with every chunk of the AVX2 loop redone by its f64 fallback
+/// (`None` without AVX2).
+#[cfg(all(test, target_arch = "x86_64"))]
+pub(crate) fn analytic_sum_nearest_by_fallback(
+    parts: &Projected,
+    width: u32,
+    height: u32,
+    step: f64,
+    data: &[f32],
+    stride: usize,
+) -> Option<(f64, usize)> {
+    let simd = pulp::x86::V3::try_new()?;
+    Some(simd.vectorize(avx2::Nearest {
+        simd,
+        parts,
+        width,
+        height,
+        step,
+        data,
+        stride,
+        force_fallback: true,
+    }))
 }
 
 /// The nearest-pixel cost `(1 − G)²` at an analytic sample (whose rounded pixel is in the
@@ -1569,12 +2712,14 @@ fn occluders<'a>(
     let mut out = Occluders {
         shapes: [&Inside::Never; 2],
         boxes: [EMPTY_BOX; 2],
+        idx: [0; 2],
         n: 0,
     };
     for k in 0..n.min(3) {
         if k != i && out.n < 2 && overlap(&bb, &boxes[k]) {
             out.shapes[out.n] = &shapes[k];
             out.boxes[out.n] = boxes[k];
+            out.idx[out.n] = k;
             out.n += 1;
         }
     }
