@@ -50,8 +50,15 @@ pub const TABLE_BELOW_SHOULDER: f64 = 0.33;
 pub const REGION_PAD: f64 = 0.05;
 /// First camera, actor frame (data README): eye and target.
 pub const CAMERA0: ([f64; 3], [f64; 3]) = ([0.6, 1.3, 0.6], [-0.1, 0.3, -0.1]);
-/// Second camera (two-view condition), actor frame: the first mirrored to the actor's left.
-pub const CAMERA1: ([f64; 3], [f64; 3]) = ([-0.8, 1.2, 0.6], [-0.1, 0.3, -0.1]);
+/// Second camera (two-view condition), actor frame: behind and to the right of the acting
+/// shoulder, looking at the same point as the first. Chosen on training subjects ADL001–004 and
+/// ADL006–007 (36 trials, repetitions 1 and 3; RMSE / table error / recognition, mono 9.2 /
+/// 8.2 cm / 91.7 %): the earlier left-front camera (−0.8, 1.2, 0.6) gave 9.7 / 10.3 cm / 97.2 %
+/// (during reaches it prefers retracted poses with the forearm foreshortened towards it), this
+/// one 8.8 / 6.4 cm / 97.2 %; front-high (−0.1, 1.3, 0.9) 8.4 / 8.3 cm, left-high
+/// (−0.6, 0.6, 1.0) 8.6 / 9.0 cm, right (1.1, 0.0, 0.7) 10.9 / 8.8 cm, left-front-high
+/// (−0.8, 1.2, 1.0) 11.2 / 19.2 cm (docs/results.md).
+pub const CAMERA1: ([f64; 3], [f64; 3]) = ([1.0, -0.3, 0.6], [-0.1, 0.3, -0.1]);
 /// Horizontal field of view of both cameras (degrees).
 pub const HFOV_DEG: f64 = 65.0;
 /// Frame rate of the rendered video.
@@ -165,13 +172,15 @@ fn camera(name: &str, eye: [f64; 3], target: [f64; 3]) -> Result<Camera> {
     })
 }
 
-/// The scene of the experiment: `views` cameras (1 or 2), the table around the model's θ region,
-/// the right arm with the actor's arm lengths.
-pub fn scene_for(model: &ActionModel, views: usize, lengths: [f64; 2]) -> Result<Scene> {
+/// The scene of the experiment: `cond.views` cameras (1 or 2; the second at
+/// `cond.second_camera`), the table around the model's θ region, the right arm with the actor's
+/// arm lengths.
+pub fn scene_for(model: &ActionModel, cond: &Condition, lengths: [f64; 2]) -> Result<Scene> {
     let (c, h) = theta_region(model);
     let mut cameras = vec![camera("camera0", CAMERA0.0, CAMERA0.1)?];
-    if views > 1 {
-        cameras.push(camera("camera1", CAMERA1.0, CAMERA1.1)?);
+    if cond.views > 1 {
+        let (eye, target) = cond.second_camera;
+        cameras.push(camera("camera1", eye, target)?);
     }
     let o = Vector3::from(SHOULDER);
     Ok(Scene {
@@ -231,6 +240,12 @@ pub struct Condition {
     pub speed_range: Option<[f64; 2]>,
     /// Seed of the filter and of the rendered backgrounds.
     pub seed: u64,
+    /// Eye and target of the second camera (actor frame), used when `views` > 1.
+    pub second_camera: ([f64; 3], [f64; 3]),
+    /// γ of Eq. 3; `None`: 0.15·√V.
+    pub gamma: Option<f64>,
+    /// Whether the synthesis draws the torso and head (diagnostic: `false` leaves them out).
+    pub body: bool,
 }
 
 impl Condition {
@@ -249,12 +264,16 @@ impl Condition {
             per_action_theta: true,
             speed_range: None,
             seed: 9,
+            second_camera: CAMERA1,
+            gamma: None,
+            body: true,
         }
     }
 
-    /// γ of Eq. 3 for this condition: 0.15·√V.
+    /// γ of Eq. 3 for this condition: the override, else 0.15·√V.
     pub fn gamma(&self) -> f64 {
-        GAMMA * (self.views.max(1) as f64).sqrt()
+        self.gamma
+            .unwrap_or_else(|| GAMMA * (self.views.max(1) as f64).sqrt())
     }
 }
 
@@ -362,6 +381,9 @@ pub fn run_video(
     let mut synth = scene_synth(scene, lengths);
     synth.clutter = cond.clutter;
     synth.noise_sigma = cond.noise;
+    if !cond.body {
+        synth.body = None;
+    }
     let geometry = render_arm(scene, lengths);
     let cams: Vec<_> = scene.cameras.iter().map(render_camera).collect();
     let likelihood =
@@ -578,7 +600,7 @@ pub fn run_condition(
         .par_iter()
         .map(|t| {
             let l = lengths.get(&t.subject).copied().unwrap_or(t.lengths);
-            let scene = scene_for(model, cond.views, l)?;
+            let scene = scene_for(model, cond, l)?;
             run_video(model, &scene, &[Segment::from(t)], cond, &[])
         })
         .collect::<Result<_>>()?;
@@ -593,5 +615,268 @@ pub fn two_action_label(a: &str) -> String {
         "reach".into()
     } else {
         a.to_string()
+    }
+}
+
+/// Per-view diagnosis of one frame ([`diagnose_views`]).
+#[derive(Clone, Debug, Serialize)]
+pub struct ViewDiagnosis {
+    /// Frame of the trial.
+    pub frame: usize,
+    /// View (camera index).
+    pub view: usize,
+    /// ε̄_v of the true (corrected) pose.
+    pub truth_error: f64,
+    /// Fraction of the true pose's contour points where the synthesis draws the torso or head
+    /// (the pixel differs from a rendering without the body).
+    pub occluded: f64,
+    /// Pixel coordinates of p, q, r (NaN behind the camera).
+    pub joints_uv: [[f64; 2]; 3],
+    /// Mean ε̄_v of the perturbed poses (fingertip and elbow moved in random directions).
+    pub perturbed_error: f64,
+    /// Fraction of the perturbed poses with a lower ε̄_v than the truth.
+    pub perturbed_better: f64,
+    /// Mean ε̄_v of poses moved along the first camera's viewing rays (its depth ambiguity).
+    pub depth_error: f64,
+    /// Fraction of the depth-perturbed poses with a lower ε̄_v than the truth.
+    pub depth_better: f64,
+}
+
+/// Diagnoses the observation model of a trial frame by frame, view by view: renders each frame
+/// as [`run_video`] does (and once without the body; a contour pixel that differs is counted as
+/// hidden, which also counts torso pixels just outside the arm), computes the edge images and scores the
+/// true pose (corrected to the scene's arm lengths) against `perturbations` random
+/// perturbations of `step` metres (fingertip, half of it at the elbow) and as many along the
+/// first camera's viewing rays. No tracking.
+pub fn diagnose_views(
+    model: &ActionModel,
+    trial: &TestTrial,
+    cond: &Condition,
+    lengths: [f64; 2],
+    step: f64,
+    perturbations: usize,
+) -> Result<Vec<ViewDiagnosis>> {
+    use rand::{Rng, SeedableRng};
+    let scene = scene_for(model, cond, lengths)?;
+    let mut synth = scene_synth(&scene, lengths);
+    synth.clutter = cond.clutter;
+    synth.noise_sigma = cond.noise;
+    let mut bare = synth.clone();
+    bare.body = None;
+    let geometry = render_arm(&scene, lengths);
+    let cams: Vec<_> = scene.cameras.iter().map(render_camera).collect();
+    let likelihood =
+        LikelihoodModel::new(cams.clone(), geometry.clone(), cond.gamma(), cond.contour)
+            .map_err(|e| Error::Config(format!("observation model: {e}")))?;
+    let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(cond.seed ^ 0xd1a9);
+    let mut scratch = actrack_render::RenderScratch::new();
+    let mut ws = EdgeWorkspace::new();
+    let mut edge = EdgeImage::default();
+    let eye0 = scene.cameras[0].centre();
+    let mut out = Vec::new();
+    for (frame, pose) in trial.poses.iter().enumerate() {
+        let mut truth = *pose;
+        actrack_render::correct_arm(&geometry, &mut truth, None);
+        let world = scene.pose_to_world(&truth);
+        let shown = scene.pose_to_world(pose);
+        // Perturbed poses (world frame), corrected.
+        let mut random = Vec::with_capacity(perturbations);
+        let mut depth = Vec::with_capacity(perturbations);
+        for k in 0..perturbations {
+            let mut dir = || {
+                let d = Vector3::new(
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-1.0..1.0),
+                );
+                d.try_normalize(1e-9).unwrap_or_else(Vector3::z)
+            };
+            let (dr, dq) = (dir() * step, dir() * (0.5 * step));
+            let mut p = world;
+            for c in 0..3 {
+                p[6 + c] += dr[c];
+                p[3 + c] += dq[c];
+            }
+            actrack_render::correct_arm(&geometry, &mut p, None);
+            random.push(p);
+            // Along camera 0's rays through q and r, alternately nearer and farther.
+            let sign = if k % 2 == 0 { 1.0 } else { -1.0 };
+            let s = sign * step * (0.5 + (k / 2) as f64 / perturbations.max(1) as f64);
+            let mut p = world;
+            for (j, f) in [(1usize, 0.5), (2, 1.0)] {
+                let x = Vector3::new(p[3 * j], p[3 * j + 1], p[3 * j + 2]);
+                let ray = (x - eye0).normalize() * (s * f);
+                for c in 0..3 {
+                    p[3 * j + c] += ray[c];
+                }
+            }
+            actrack_render::correct_arm(&geometry, &mut p, None);
+            depth.push(p);
+        }
+        for (v, cam) in cams.iter().enumerate() {
+            let seed = cond.seed.wrapping_add(v as u64);
+            let img = synth
+                .render(cam, &shown, seed)
+                .map_err(|e| Error::Config(format!("synth: frame {frame}: {e}")))?;
+            let img0 = bare
+                .render(cam, &shown, seed)
+                .map_err(|e| Error::Config(format!("synth: frame {frame}: {e}")))?;
+            let view = ImageView::rgb8(&img.data, img.width, img.height)
+                .map_err(|e| Error::Config(format!("frame {frame}: {e}")))?;
+            ws.compute_into(view, &scene.edge_params(img.width), &mut edge)
+                .map_err(|e| Error::Config(format!("frame {frame}: {e}")))?;
+            let contour = contour_points(cam, &geometry, &world, cond.contour);
+            let w = img.width as usize;
+            let hidden = contour
+                .iter()
+                .filter(|c| {
+                    let (u, y) = (c[0].round(), c[1].round());
+                    if u < 0.0 || y < 0.0 || u >= f64::from(img.width) || y >= f64::from(img.height)
+                    {
+                        return false;
+                    }
+                    let i = 3 * (y as usize * w + u as usize);
+                    img.data[i..i + 3] != img0.data[i..i + 3]
+                })
+                .count();
+            let score = |p: &[f64; 9], s: &mut actrack_render::RenderScratch| {
+                likelihood.view_error(v, &edge, p, s)
+            };
+            let e_truth = score(&world, &mut scratch);
+            let stats = |ps: &[[f64; 9]], s: &mut actrack_render::RenderScratch| {
+                let errs: Vec<f64> = ps.iter().map(|p| score(p, s)).collect();
+                let n = errs.len().max(1) as f64;
+                (
+                    errs.iter().sum::<f64>() / n,
+                    errs.iter().filter(|&&e| e < e_truth).count() as f64 / n,
+                )
+            };
+            let (pe, pb) = stats(&random, &mut scratch);
+            let (de, db) = stats(&depth, &mut scratch);
+            let joints_uv = std::array::from_fn(|j| {
+                let x = Vector3::new(world[3 * j], world[3 * j + 1], world[3 * j + 2]);
+                scene.cameras[v]
+                    .project(&x)
+                    .map_or([f64::NAN; 2], |(u, y)| [u, y])
+            });
+            out.push(ViewDiagnosis {
+                frame,
+                view: v,
+                truth_error: e_truth,
+                occluded: hidden as f64 / contour.len().max(1) as f64,
+                joints_uv,
+                perturbed_error: pe,
+                perturbed_better: pb,
+                depth_error: de,
+                depth_better: db,
+            });
+        }
+    }
+    Ok(out)
+}
+
+/// ε̄_v of given world poses in every view, frame by frame, on the frames [`run_video`] renders
+/// for `trial` (diagnostic): `candidates[k][frame]` is the k-th pose to score at that frame; the
+/// result is `[frame][k][view]`, with the true pose (corrected) scored first (k = 0).
+pub fn view_errors(
+    model: &ActionModel,
+    trial: &TestTrial,
+    cond: &Condition,
+    lengths: [f64; 2],
+    candidates: &[Vec<[f64; 9]>],
+) -> Result<Vec<Vec<Vec<f64>>>> {
+    let scene = scene_for(model, cond, lengths)?;
+    let mut synth = scene_synth(&scene, lengths);
+    synth.clutter = cond.clutter;
+    synth.noise_sigma = cond.noise;
+    if !cond.body {
+        synth.body = None;
+    }
+    let geometry = render_arm(&scene, lengths);
+    let cams: Vec<_> = scene.cameras.iter().map(render_camera).collect();
+    let likelihood =
+        LikelihoodModel::new(cams.clone(), geometry.clone(), cond.gamma(), cond.contour)
+            .map_err(|e| Error::Config(format!("observation model: {e}")))?;
+    let mut scratch = actrack_render::RenderScratch::new();
+    let mut ws = EdgeWorkspace::new();
+    let mut edges: Vec<EdgeImage> = cams.iter().map(|_| EdgeImage::default()).collect();
+    let mut out = Vec::new();
+    for (frame, pose) in trial.poses.iter().enumerate() {
+        let mut truth = *pose;
+        actrack_render::correct_arm(&geometry, &mut truth, None);
+        let world = scene.pose_to_world(pose);
+        for (v, cam) in cams.iter().enumerate() {
+            let img = synth
+                .render(cam, &world, cond.seed.wrapping_add(v as u64))
+                .map_err(|e| Error::Config(format!("synth: frame {frame}: {e}")))?;
+            let view = ImageView::rgb8(&img.data, img.width, img.height)
+                .map_err(|e| Error::Config(format!("frame {frame}: {e}")))?;
+            ws.compute_into(view, &scene.edge_params(img.width), &mut edges[v])
+                .map_err(|e| Error::Config(format!("frame {frame}: {e}")))?;
+        }
+        let poses: Vec<[f64; 9]> = std::iter::once(scene.pose_to_world(&truth))
+            .chain(candidates.iter().filter_map(|c| c.get(frame).copied()))
+            .collect();
+        out.push(
+            poses
+                .iter()
+                .map(|p| {
+                    (0..cams.len())
+                        .map(|v| likelihood.view_error(v, &edges[v], p, &mut scratch))
+                        .collect()
+                })
+                .collect(),
+        );
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Rest, forward-reach, across-reach and cup-at-mouth poses (actor frame) of a typical
+    /// subject.
+    const POSES: [[f64; 9]; 4] = [
+        [0.0, 0.0, 0.0, 0.04, 0.05, -0.28, 0.12, 0.38, -0.3],
+        [0.0, 0.0, 0.0, 0.03, 0.25, -0.15, 0.0, 0.68, -0.33],
+        [0.0, 0.0, 0.0, -0.05, 0.24, -0.16, -0.34, 0.58, -0.33],
+        [0.0, 0.0, 0.0, 0.05, 0.12, -0.26, -0.1, 0.12, 0.12],
+    ];
+
+    #[test]
+    fn reproduce_cameras_see_every_joint() {
+        for (eye, target) in [CAMERA0, CAMERA1] {
+            let cam = camera("c", eye, target).unwrap();
+            for pose in &POSES {
+                for j in 0..3 {
+                    let x = Vector3::new(pose[3 * j], pose[3 * j + 1], pose[3 * j + 2])
+                        + Vector3::from(SHOULDER);
+                    let (u, v) = cam.project(&x).unwrap();
+                    assert!(
+                        cam.in_image(u, v),
+                        "{eye:?}: joint {j} of {pose:?} at {u}, {v}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn reproduce_condition_gamma() {
+        let mono = Condition::monocular("m");
+        assert!((mono.gamma() - GAMMA).abs() < 1e-12);
+        let two = Condition {
+            views: 2,
+            ..mono.clone()
+        };
+        assert!((two.gamma() - GAMMA * 2f64.sqrt()).abs() < 1e-12);
+        let set = Condition {
+            gamma: Some(0.2),
+            ..two
+        };
+        assert!((set.gamma() - 0.2).abs() < 1e-12);
+        assert_eq!(mono.second_camera, CAMERA1);
+        assert!(mono.body);
     }
 }
