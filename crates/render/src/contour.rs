@@ -1222,9 +1222,12 @@ impl<C: Fn(f64, f64) -> f64> pulp::WithSimd for SumOp<'_, C> {
 }
 
 /// The analytic sample loop of [`analytic_sum_nearest`] with explicit AVX2 vectors (pulp's
-/// `V3` token, no `unsafe` in our code): the same IEEE operations in the same order as the
-/// portable four-lane loop ([`sample_parts`]), so the same points pass, and the pixel index,
-/// the read of G and `(1 − G)²` of four samples at a time.
+/// `V3` token, no `unsafe` in our code): eight samples per register in f32, relative to an
+/// integer anchor, with a bound of their error against the f64 samples of the portable loop
+/// ([`sample_parts`]); a chunk of eight with a decision (rounded pixel, image bounds, inside
+/// another part) within that bound of flipping is redone by the f64 loop (the same IEEE
+/// operations in the same order as the portable loop). So the same points pass, and their
+/// `(1 − G)²` are summed in f64 in the portable loop's lanes and order: bit-identical sums.
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
     use pulp::{Simd, f32x4, f32x8, f64x4, i32x8, m32x8, m64x4, x86::V3};
@@ -2620,7 +2623,9 @@ mod avx2 {
 /// `Σ (1 − G(c))²` over the analytic contour samples `c` at their rounded pixels (`data`:
 /// G row-major with `stride` values per row; the image is at least `width × height`) and
 /// their number: the same points and values as `analytic_sum` with the nearest-pixel cost, with
-/// AVX2 when the CPU has it (the lanes are summed separately: the sum differs by rounding).
+/// AVX2 when the CPU has it (f32 lanes with an exact f64 fallback, see `avx2`; the sum is the
+/// portable loop's bit for bit, its four lanes summed separately, i.e. it differs from the
+/// sum in point order by rounding).
 pub(crate) fn analytic_sum_nearest(
     parts: &Projected,
     width: u32,
