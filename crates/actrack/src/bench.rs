@@ -68,8 +68,9 @@ pub struct BenchOptions {
     /// Likelihood device.
     pub device: Device,
     /// Overlap each frame's tracker step with the next frame's edge images
-    /// ([`Runner::step_overlapped`]; what `track` does on a video); `false` times the serial
-    /// order edge image → step.
+    /// ([`Runner::step_overlapped`]; what `track` does on a video, where the next frame's
+    /// decoding joins the edge image). Default `false`: the serial order edge image → step,
+    /// whose stage times add up to the frame.
     pub overlap: bool,
 }
 
@@ -87,7 +88,7 @@ impl Default for BenchOptions {
             seed: 7,
             states: 20,
             device: Device::Cpu,
-            overlap: true,
+            overlap: false,
         }
     }
 }

@@ -1,5 +1,5 @@
 //! `actrack-cli bench [--particles N] [--width W --height H] [--views V]
-//! [--contour raster|analytic] [--device cpu|gpu|auto] [--threads N] [--frames F] [--no-overlap]
+//! [--contour raster|analytic] [--device cpu|gpu|auto] [--threads N] [--frames F] [--overlap]
 //! [--json]`:
 //! tracks a synthetic sequence and prints the time per frame (median, p95), frames/s, the share
 //! of each stage and the peak memory, so users can check the real-time budget on their machine.
@@ -68,10 +68,10 @@ pub struct Args {
     /// Seed.
     #[arg(long, default_value_t = 7)]
     pub seed: u64,
-    /// Time the serial order (edge image, then the tracker step) instead of overlapping each
-    /// step with the next frame's edge image, as `track` does.
+    /// Overlap each tracker step with the next frame's edge image, as `track` does (there the
+    /// next frame's decoding joins it); default: the serial order, whose stages add up.
     #[arg(long)]
-    pub no_overlap: bool,
+    pub overlap: bool,
     /// Print one JSON object.
     #[arg(long)]
     pub json: bool,
@@ -161,7 +161,7 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
             DeviceArg::Gpu => Device::Gpu,
             DeviceArg::Auto => Device::Auto,
         },
-        overlap: !args.no_overlap,
+        overlap: args.overlap,
     };
     let report = run_bench(&opts)?;
     if let Some(note) = &report.device_note {
