@@ -475,6 +475,8 @@ impl Runner {
     /// One frame (one image per view): edge images, then the tracker step; the stage times.
     pub fn step(&mut self, views: &[ImageRgb8]) -> Result<FrameTimes> {
         let t0 = Instant::now();
+        // The frame is tracked now: an overlapped step must not track it a second time.
+        self.primed = false;
         compute_edges(views, &self.params, &mut self.workspaces, &mut self.edges)?;
         let edge_ms = t0.elapsed().as_secs_f64() * 1e3;
         let stages = filter_step(
