@@ -63,7 +63,11 @@ fn reproduce_one_held_out_trial() {
     assert!(n >= 20, "{n} frames");
 
     // The camera of the data README keeps the arm in view.
-    let scene = scene_for(&model, 1, held_out[0].lengths).unwrap();
+    let cond = Condition {
+        particles: 60,
+        ..Condition::monocular("smoke")
+    };
+    let scene = scene_for(&model, &cond, held_out[0].lengths).unwrap();
     let seg = Segment::from(&held_out[0]);
     for p in &seg.poses {
         let w = scene.pose_to_world(p);
@@ -74,10 +78,6 @@ fn reproduce_one_held_out_trial() {
         }
     }
 
-    let cond = Condition {
-        particles: 60,
-        ..Condition::monocular("smoke")
-    };
     let (res, runs) = run_condition(&model, &held_out, &cond).unwrap();
     assert_eq!(runs.len(), 1);
     assert_eq!(runs[0].track.rows.len(), n);

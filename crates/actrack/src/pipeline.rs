@@ -232,6 +232,10 @@ pub struct Pipeline {
     primed: bool,
     /// Workspaces and the back buffer the next frame's edge images are computed into.
     ahead: Lookahead,
+    /// Wall seconds of the primed frame's edge images.
+    edge_seconds: f64,
+    /// Wall seconds of the last step's edge images + filter step (decoding excluded).
+    step_seconds: f64,
     names: Vec<String>,
 }
 
@@ -244,6 +248,8 @@ pub struct Lookahead {
     edges: Vec<EdgeImage>,
     /// Whether `edges` holds the images of a frame since the last swap.
     ready: bool,
+    /// Wall seconds of the last `prepare`.
+    seconds: f64,
 }
 
 impl Lookahead {
@@ -252,6 +258,7 @@ impl Lookahead {
     /// camera.
     pub fn prepare(&mut self, frame: usize, images: &[&RgbImage]) -> Result<()> {
         self.ready = false;
+        let t0 = Instant::now();
         let views = images.len().min(self.scene.cameras.len());
         self.edges.resize_with(views, EdgeImage::default);
         for (v, img) in images.iter().enumerate().take(views) {
@@ -273,6 +280,7 @@ impl Lookahead {
                 .map_err(|e| Error::Config(format!("frame {frame}: {e}")))?;
         }
         self.ready = true;
+        self.seconds = t0.elapsed().as_secs_f64();
         Ok(())
     }
 }
@@ -320,7 +328,10 @@ impl Pipeline {
                 workspaces: scene.cameras.iter().map(|_| EdgeWorkspace::new()).collect(),
                 edges: Vec::with_capacity(scene.cameras.len()),
                 ready: false,
+                seconds: 0.0,
             },
+            edge_seconds: 0.0,
+            step_seconds: 0.0,
             names,
         })
     }
@@ -345,7 +356,17 @@ impl Pipeline {
     pub fn step(&mut self, frame: usize, images: &[&RgbImage]) -> Result<FrameResult> {
         self.prime(frame, images)?;
         self.primed = false;
-        Ok(self.filter())
+        let t0 = Instant::now();
+        let r = self.filter();
+        self.step_seconds = self.edge_seconds + t0.elapsed().as_secs_f64();
+        Ok(r)
+    }
+
+    /// Wall seconds of the last step's own work: its frame's edge images plus the filter step
+    /// (decoding excluded; in [`Pipeline::step_overlapped`] the two ran in different calls,
+    /// each alongside other work).
+    pub fn last_step_seconds(&self) -> f64 {
+        self.step_seconds
     }
 
     /// Computes the edge images of a frame that [`Pipeline::step_overlapped`] then tracks.
@@ -383,10 +404,15 @@ impl Pipeline {
             ahead,
             ..
         } = self;
-        let (r, side) = rayon::join(
-            || filter(scene, geometry, likelihood, tracker, edges),
+        let ((r, filter_seconds), side) = rayon::join(
+            || {
+                let t0 = Instant::now();
+                let r = filter(scene, geometry, likelihood, tracker, edges);
+                (r, t0.elapsed().as_secs_f64())
+            },
             || alongside(ahead),
         );
+        self.step_seconds = self.edge_seconds + filter_seconds;
         self.primed = false;
         if self.ahead.ready {
             self.swap_ahead();
@@ -396,6 +422,7 @@ impl Pipeline {
 
     fn swap_ahead(&mut self) {
         std::mem::swap(&mut self.edges, &mut self.ahead.edges);
+        self.edge_seconds = self.ahead.seconds;
         self.ahead.ready = false;
         self.primed = true;
     }
@@ -457,7 +484,8 @@ pub struct TrackSummary {
     pub frames: usize,
     /// Wall-clock seconds of the tracking loop (decoding included).
     pub seconds: f64,
-    /// Seconds spent in the filter step (edge image, propagation, likelihood).
+    /// Seconds spent in the edge images and filter steps (propagation, likelihood, estimates)
+    /// of the frames, decoding excluded; with look-ahead these ran alongside the decoding.
     pub filter_seconds: f64,
     /// Stopped by the interrupt flag before the end of the input.
     pub interrupted: bool,
@@ -581,7 +609,6 @@ pub fn track(
         let Some(frame) = next.take() else {
             break;
         };
-        let t0 = Instant::now();
         let (r, read) = pipeline.step_overlapped(|ahead| -> Result<Option<Frame>> {
             let f = source.next_frame()?;
             if let Some(f) = &f {
@@ -589,7 +616,7 @@ pub fn track(
             }
             Ok(f)
         })?;
-        filter_seconds += t0.elapsed().as_secs_f64();
+        filter_seconds += pipeline.last_step_seconds();
         match read {
             Ok(f) => next = f,
             Err(e) => pending = Some(e),
@@ -727,6 +754,7 @@ mod tests {
                     })
                     .unwrap();
                 out.push(r);
+                assert!(p.last_step_seconds() > 0.0);
             }
             assert!(p.step_overlapped(|_| ()).is_err());
             out
