@@ -494,12 +494,11 @@ impl Runner {
     }
 
     /// Computes the edge images of the first frame of an overlapped run (see
-    /// [`Runner::step_overlapped`]); returns their wall time, ms.
-    pub fn prime(&mut self, views: &[ImageRgb8]) -> Result<f64> {
-        let t0 = Instant::now();
+    /// [`Runner::step_overlapped`]).
+    pub fn prime(&mut self, views: &[ImageRgb8]) -> Result<()> {
         compute_edges(views, &self.params, &mut self.workspaces, &mut self.edges)?;
         self.primed = true;
-        Ok(t0.elapsed().as_secs_f64() * 1e3)
+        Ok(())
     }
 
     /// One frame of a video whose frames are known ahead (a file, a stream being caught up):

@@ -359,6 +359,33 @@ pub fn tracker_config(model: &ActionModel, cond: &Condition) -> Result<TrackerCo
         .map_err(|e| Error::Config(format!("tracker: {e}")))
 }
 
+/// What rendering and scoring a condition in a scene needs: the scene synthesis with the
+/// condition's clutter and noise (body kept), the arm geometry, the render cameras and the
+/// observation model with the condition's γ and contour method.
+struct Rig {
+    synth: actrack_render::synth::SceneSynth,
+    geometry: actrack_render::ArmGeometry,
+    cams: Vec<actrack_render::Camera>,
+    likelihood: LikelihoodModel,
+}
+
+fn rig(scene: &Scene, cond: &Condition, lengths: [f64; 2]) -> Result<Rig> {
+    let mut synth = scene_synth(scene, lengths);
+    synth.clutter = cond.clutter;
+    synth.noise_sigma = cond.noise;
+    let geometry = render_arm(scene, lengths);
+    let cams: Vec<_> = scene.cameras.iter().map(render_camera).collect();
+    let likelihood =
+        LikelihoodModel::new(cams.clone(), geometry.clone(), cond.gamma(), cond.contour)
+            .map_err(|e| Error::Config(format!("observation model: {e}")))?;
+    Ok(Rig {
+        synth,
+        geometry,
+        cams,
+        likelihood,
+    })
+}
+
 /// Renders `segments` in `scene` frame by frame and tracks them; `overlay_frames` are kept as
 /// overlay images (best pose's contour and θ̄).
 pub fn run_video(
@@ -378,17 +405,15 @@ pub fn run_video(
             .lower_arm_length
             .unwrap_or(model.arm_lengths.forearm_hand),
     ];
-    let mut synth = scene_synth(scene, lengths);
-    synth.clutter = cond.clutter;
-    synth.noise_sigma = cond.noise;
+    let Rig {
+        mut synth,
+        geometry,
+        cams,
+        likelihood,
+    } = rig(scene, cond, lengths)?;
     if !cond.body {
         synth.body = None;
     }
-    let geometry = render_arm(scene, lengths);
-    let cams: Vec<_> = scene.cameras.iter().map(render_camera).collect();
-    let likelihood =
-        LikelihoodModel::new(cams.clone(), geometry.clone(), cond.gamma(), cond.contour)
-            .map_err(|e| Error::Config(format!("observation model: {e}")))?;
     let names: Vec<String> = model.actions.iter().map(|a| a.name.clone()).collect();
     let mut tracker = Tracker::new(
         model.actions.iter().map(|a| &a.phmm),
@@ -658,16 +683,14 @@ pub fn diagnose_views(
 ) -> Result<Vec<ViewDiagnosis>> {
     use rand::{Rng, SeedableRng};
     let scene = scene_for(model, cond, lengths)?;
-    let mut synth = scene_synth(&scene, lengths);
-    synth.clutter = cond.clutter;
-    synth.noise_sigma = cond.noise;
+    let Rig {
+        synth,
+        geometry,
+        cams,
+        likelihood,
+    } = rig(&scene, cond, lengths)?;
     let mut bare = synth.clone();
     bare.body = None;
-    let geometry = render_arm(&scene, lengths);
-    let cams: Vec<_> = scene.cameras.iter().map(render_camera).collect();
-    let likelihood =
-        LikelihoodModel::new(cams.clone(), geometry.clone(), cond.gamma(), cond.contour)
-            .map_err(|e| Error::Config(format!("observation model: {e}")))?;
     let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(cond.seed ^ 0xd1a9);
     let mut scratch = actrack_render::RenderScratch::new();
     let mut ws = EdgeWorkspace::new();
@@ -786,17 +809,15 @@ pub fn view_errors(
     candidates: &[Vec<[f64; 9]>],
 ) -> Result<Vec<Vec<Vec<f64>>>> {
     let scene = scene_for(model, cond, lengths)?;
-    let mut synth = scene_synth(&scene, lengths);
-    synth.clutter = cond.clutter;
-    synth.noise_sigma = cond.noise;
+    let Rig {
+        mut synth,
+        geometry,
+        cams,
+        likelihood,
+    } = rig(&scene, cond, lengths)?;
     if !cond.body {
         synth.body = None;
     }
-    let geometry = render_arm(&scene, lengths);
-    let cams: Vec<_> = scene.cameras.iter().map(render_camera).collect();
-    let likelihood =
-        LikelihoodModel::new(cams.clone(), geometry.clone(), cond.gamma(), cond.contour)
-            .map_err(|e| Error::Config(format!("observation model: {e}")))?;
     let mut scratch = actrack_render::RenderScratch::new();
     let mut ws = EdgeWorkspace::new();
     let mut edges: Vec<EdgeImage> = cams.iter().map(|_| EdgeImage::default()).collect();
