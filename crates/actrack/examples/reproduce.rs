@@ -9,7 +9,8 @@
 //! name contains one of these), `--train-subjects ADL006,ADL007` (training subjects'
 //! repetitions 1 and 3 instead of the held-out subjects), `--camera1 ex,ey,ez,tx,ty,tz` (the
 //! second camera, actor frame), `--gamma2 G` (γ of the two-view run), `--no-body` (no torso and
-//! head in the synthesis), `--diag` (per-view ε̄ of the true pose against perturbed poses and
+//! head in the synthesis), `--particles N`, `--contour raster|analytic` and `--gamma G`
+//! (override every selected condition's), `--diag` (per-view ε̄ of the true pose against perturbed poses and
 //! the share of its contour the body hides; no tracking), `--trace NAME` (per-frame track and
 //! per-view ε̄ of truth and best particle) with `--dump DIR` (views of a few frames).
 
@@ -46,6 +47,12 @@ struct Args {
     gamma2: Option<f64>,
     /// Leave the torso and head out of the synthesis (diagnostic).
     no_body: bool,
+    /// Override every selected condition's number of particles.
+    particles: Option<usize>,
+    /// Override every selected condition's contour method (`raster` or `analytic`).
+    contour: Option<ContourMethod>,
+    /// Override every selected condition's γ (Eq. 3).
+    gamma: Option<f64>,
     /// Per-view likelihood diagnosis of the selected trials (no tracking).
     diag: bool,
     /// Print the per-frame track of the trials whose name contains this.
@@ -63,6 +70,9 @@ impl Args {
             || self.camera1.is_some()
             || self.gamma2.is_some()
             || self.no_body
+            || self.particles.is_some()
+            || self.contour.is_some()
+            || self.gamma.is_some()
             || self.diag
     }
 
@@ -91,6 +101,9 @@ fn args() -> Args {
         camera1: None,
         gamma2: None,
         no_body: false,
+        particles: None,
+        contour: None,
+        gamma: None,
         diag: false,
         trace: None,
         dump: None,
@@ -125,6 +138,18 @@ fn args() -> Args {
             }
             "--gamma2" => a.gamma2 = it.next().and_then(|x| x.parse().ok()),
             "--no-body" => a.no_body = true,
+            "--gamma" => a.gamma = it.next().and_then(|x| x.parse().ok()),
+            "--particles" => a.particles = it.next().and_then(|x| x.parse().ok()),
+            "--contour" => {
+                a.contour = match it.next().as_deref() {
+                    Some("raster") => Some(ContourMethod::Raster),
+                    Some("analytic") => Some(ContourMethod::Analytic),
+                    _ => {
+                        eprintln!("reproduce: --contour wants raster or analytic");
+                        std::process::exit(2);
+                    }
+                }
+            }
             "--diag" => a.diag = true,
             "--trace" => a.trace = it.next(),
             "--dump" => a.dump = it.next().map(PathBuf::from),
@@ -369,6 +394,42 @@ fn write_docs(
 /// The line of results.md after which the text is written by hand.
 const MARKER: &str = "\n<!-- analysis -->\n";
 
+/// Decomposes the reported pose's error per joint (all frames of `runs`): the mean error vector
+/// (bias, actor frame), and the RMS of the error along the first camera's viewing ray (depth)
+/// and across it (image plane), in cm.
+fn error_breakdown(runs: &[VideoRun]) {
+    let o = actrack::reproduce::SHOULDER;
+    let eye = actrack::reproduce::CAMERA0.0;
+    let eye = [eye[0] + o[0], eye[1] + o[1], eye[2] + o[2]];
+    for (j, name) in ["shoulder", "elbow", "fingertip"].iter().enumerate() {
+        let (mut bias, mut along, mut across, mut n) = ([0.0f64; 3], 0.0, 0.0, 0usize);
+        for run in runs {
+            for (t, k) in run.truth.rows.iter().zip(&run.track.rows) {
+                let e: [f64; 3] = std::array::from_fn(|c| k.pose[3 * j + c] - t.pose[3 * j + c]);
+                let ray: [f64; 3] = std::array::from_fn(|c| t.pose[3 * j + c] - eye[c]);
+                let len = ray.iter().map(|x| x * x).sum::<f64>().sqrt();
+                let d = (0..3).map(|c| e[c] * ray[c] / len).sum::<f64>();
+                let e2 = e.iter().map(|x| x * x).sum::<f64>();
+                for c in 0..3 {
+                    bias[c] += e[c];
+                }
+                along += d * d;
+                across += (e2 - d * d).max(0.0);
+                n += 1;
+            }
+        }
+        let n = n.max(1) as f64;
+        println!(
+            "{name:9}: bias {:+.1} {:+.1} {:+.1} cm | RMS along camera-0 ray {:.1} cm, across {:.1} cm (2-D)",
+            100.0 * bias[0] / n,
+            100.0 * bias[1] / n,
+            100.0 * bias[2] / n,
+            100.0 * (along / n).sqrt(),
+            100.0 * (across / n).sqrt(),
+        );
+    }
+}
+
 /// Prints a tracked video frame by frame (`--trace`): fingertip of the truth, the reported
 /// (median-filtered) pose and the best particle (actor frame, cm), θ̄ against θ, θ std, the
 /// posterior.
@@ -591,6 +652,9 @@ fn main() -> Res<()> {
         }
         let c = Condition {
             body: !a.no_body,
+            particles: a.particles.unwrap_or(c.particles),
+            contour: a.contour.unwrap_or(c.contour),
+            gamma: a.gamma.or(c.gamma),
             ..c
         };
         let (r, runs) = run_condition(m, tr, &c)?;
@@ -644,6 +708,7 @@ fn main() -> Res<()> {
         );
         if a.partial() {
             println!("{}", row(&r));
+            error_breakdown(&runs);
             eprintln!("  joints in view {:.1} %", 100.0 * r.in_view);
             for (t, i) in tr.iter().zip(&r.report.instances) {
                 eprintln!(
