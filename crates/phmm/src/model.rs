@@ -523,6 +523,67 @@ impl Phmm {
         self
     }
 
+    /// The exact marginal model of the observation coordinates `dims` (in that order): the same
+    /// π, A, exit and θ normalisation (and training θ, for multi-start), with every state's
+    /// μ̄_i, W_i and Σ_i restricted to `dims`. The marginal of a Gaussian is the Gaussian of the
+    /// sub-blocks, so the model gives the likelihood of the sub-sequence `x[:, dims]` with the
+    /// other coordinates integrated out; EM on θ (SPEC §2.6) under it estimates θ from those
+    /// coordinates only (for example the fingertip of an arm, whose posture otherwise carries
+    /// the demonstrators' build into θ). Errors: `dims` empty, out of range or repeated.
+    pub fn marginal(&self, dims: &[usize]) -> Result<Phmm, PhmmError> {
+        let bad = |reason: String| {
+            Err(PhmmError::InvalidParameter {
+                name: "dims",
+                reason,
+            })
+        };
+        if dims.is_empty() {
+            return bad("a marginal model needs at least one coordinate".into());
+        }
+        if let Some(&k) = dims.iter().find(|&&k| k >= self.d) {
+            return bad(format!(
+                "coordinate {k} is out of range: the observations are {}-D (0..{})",
+                self.d, self.d
+            ));
+        }
+        for (a, &k) in dims.iter().enumerate() {
+            if dims[..a].contains(&k) {
+                return bad(format!("coordinate {k} is listed twice"));
+            }
+        }
+        let m = dims.len();
+        let mean_bias = self
+            .mean_bias
+            .iter()
+            .map(|b| DVector::from_fn(m, |r, _| b[dims[r]]))
+            .collect();
+        let weights = self
+            .weights
+            .iter()
+            .map(|w| DMatrix::from_fn(m, self.p, |r, c| w[(dims[r], c)]))
+            .collect();
+        let covariances = self
+            .covariances
+            .iter()
+            .map(|s| DMatrix::from_fn(m, m, |r, c| s[(dims[r], dims[c])]))
+            .collect();
+        let model = Phmm::assemble(
+            false,
+            self.j,
+            self.end_mode,
+            self.covariance_kind,
+            self.start.clone(),
+            self.trans.clone(),
+            self.exit.clone(),
+            mean_bias,
+            weights,
+            self.theta_center.clone(),
+            self.theta_scale.clone(),
+            covariances,
+        )?;
+        Ok(model.with_training_thetas(self.training_thetas.clone()))
+    }
+
     /// Number of states N.
     pub fn n_states(&self) -> usize {
         self.n
