@@ -9,8 +9,8 @@
 //! name contains one of these), `--train-subjects ADL006,ADL007` (training subjects'
 //! repetitions 1 and 3 instead of the held-out subjects), `--camera1 ex,ey,ez,tx,ty,tz` (the
 //! second camera, actor frame), `--gamma2 G` (γ of the two-view run), `--no-body` (no torso and
-//! head in the synthesis), `--particles N`, `--contour raster|analytic` and `--gamma G`
-//! (override every selected condition's), `--diag` (per-view ε̄ of the true pose against perturbed poses and
+//! head in the synthesis), `--particles N`, `--contour raster|analytic`, `--gamma G` and
+//! `--short-contour-penalty λ,q` (override every selected condition's), `--diag` (per-view ε̄ of the true pose against perturbed poses and
 //! the share of its contour the body hides; no tracking), `--trace NAME` (per-frame track and
 //! per-view ε̄ of truth and best particle) with `--dump DIR` (views of a few frames).
 
@@ -53,6 +53,8 @@ struct Args {
     contour: Option<ContourMethod>,
     /// Override every selected condition's γ (Eq. 3).
     gamma: Option<f64>,
+    /// Score with the experimental short-contour penalty (`ShortContourPenalty`).
+    penalty: Option<[f64; 2]>,
     /// Per-view likelihood diagnosis of the selected trials (no tracking).
     diag: bool,
     /// Print the per-frame track of the trials whose name contains this.
@@ -73,6 +75,7 @@ impl Args {
             || self.particles.is_some()
             || self.contour.is_some()
             || self.gamma.is_some()
+            || self.penalty.is_some()
             || self.diag
     }
 
@@ -104,6 +107,7 @@ fn args() -> Args {
         particles: None,
         contour: None,
         gamma: None,
+        penalty: None,
         diag: false,
         trace: None,
         dump: None,
@@ -138,6 +142,18 @@ fn args() -> Args {
             }
             "--gamma2" => a.gamma2 = it.next().and_then(|x| x.parse().ok()),
             "--no-body" => a.no_body = true,
+            "--short-contour-penalty" => {
+                let v: Vec<f64> = list(it.next())
+                    .iter()
+                    .filter_map(|x| x.parse().ok())
+                    .collect();
+                if v.len() == 2 {
+                    a.penalty = Some([v[0], v[1]]);
+                } else {
+                    eprintln!("reproduce: --short-contour-penalty wants λ,q (e.g. 1,0.5)");
+                    std::process::exit(2);
+                }
+            }
             "--gamma" => a.gamma = it.next().and_then(|x| x.parse().ok()),
             "--particles" => a.particles = it.next().and_then(|x| x.parse().ok()),
             "--contour" => {
@@ -655,6 +671,7 @@ fn main() -> Res<()> {
             particles: a.particles.unwrap_or(c.particles),
             contour: a.contour.unwrap_or(c.contour),
             gamma: a.gamma.or(c.gamma),
+            short_contour_penalty: a.penalty.or(c.short_contour_penalty),
             ..c
         };
         let (r, runs) = run_condition(m, tr, &c)?;

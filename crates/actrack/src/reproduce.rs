@@ -246,6 +246,9 @@ pub struct Condition {
     pub gamma: Option<f64>,
     /// Whether the synthesis draws the torso and head (diagnostic: `false` leaves them out).
     pub body: bool,
+    /// Score poses with [`ShortContourPenalty`] of this weight λ and quantile q instead of
+    /// SPEC's ε̄ (an experiment, not the paper's likelihood).
+    pub short_contour_penalty: Option<[f64; 2]>,
 }
 
 impl Condition {
@@ -267,6 +270,7 @@ impl Condition {
             second_camera: CAMERA1,
             gamma: None,
             body: true,
+            short_contour_penalty: None,
         }
     }
 
@@ -362,6 +366,73 @@ pub fn tracker_config(model: &ActionModel, cond: &Condition) -> Result<TrackerCo
 /// What rendering and scoring a condition in a scene needs: the scene synthesis with the
 /// condition's clutter and noise (body kept), the arm geometry, the render cameras and the
 /// observation model with the condition's γ and contour method.
+/// An experimental observation model (not SPEC §4.3): SPEC's ε̄ is a mean over the contour's
+/// points, so a pose whose contour is short (a forearm foreshortened towards the camera, a hand
+/// at the mouth seen end-on) can lie on a few strong edges of the torso or head and beat the
+/// true pose, whose long contour crosses weak edges. Here a pose's contour shorter than the
+/// q-quantile n̄ of the contour lengths of the frame's particle set (per view) counts each
+/// missing point with error λ: ε = (Σ (1 − G)² + λ·max(0, n̄ − n)) / max(n, n̄). Poses with
+/// n ≥ n̄ get SPEC's ε̄. Deterministic for any thread count (n̄ is taken after the parallel
+/// part).
+pub struct ShortContourPenalty<'a> {
+    geometry: &'a actrack_render::ArmGeometry,
+    cams: &'a [actrack_render::Camera],
+    scene: &'a Scene,
+    edges: &'a [EdgeImage],
+    gamma: f64,
+    contour: ContourMethod,
+    /// λ and q.
+    settings: [f64; 2],
+}
+
+impl actrack_pf::ObservationModel for ShortContourPenalty<'_> {
+    fn correct(&self, pose: &mut [f64; 9]) {
+        actrack_render::correct_arm(self.geometry, pose, None);
+    }
+
+    fn log_likelihoods(&self, poses: &[[f64; 9]], out: &mut [f64]) {
+        let factor = 1.0 / (2.0 * self.gamma * self.gamma);
+        out.fill(0.0);
+        for (cam, edge) in self.cams.iter().zip(self.edges) {
+            let (w, h) = (edge.width() as i64, edge.height() as i64);
+            let g = edge.data();
+            let sums: Vec<(f64, usize)> = poses
+                .par_iter()
+                .map(|p| {
+                    let world = self.scene.pose_to_world(p);
+                    if !world.iter().all(|x| x.is_finite()) {
+                        return (0.0, 0);
+                    }
+                    let (mut s, mut n) = (0.0f64, 0usize);
+                    for c in contour_points(cam, self.geometry, &world, self.contour) {
+                        let (u, v) = (c[0].round() as i64, c[1].round() as i64);
+                        if u >= 0 && v >= 0 && u < w && v < h {
+                            let e = 1.0 - f64::from(g[(v * w + u) as usize]);
+                            s += e * e;
+                            n += 1;
+                        }
+                    }
+                    (s, n)
+                })
+                .collect();
+            let mut lens: Vec<usize> = sums.iter().map(|x| x.1).filter(|&n| n > 0).collect();
+            lens.sort_unstable();
+            let [weight, q] = self.settings;
+            let at = ((lens.len() as f64 * q.clamp(0.0, 1.0)) as usize).min(lens.len().max(1) - 1);
+            let reference = lens.get(at).copied().unwrap_or(0) as f64;
+            for (o, &(s, n)) in out.iter_mut().zip(&sums) {
+                let n = n as f64;
+                let eps = if n == 0.0 {
+                    1.0
+                } else {
+                    ((s + weight * (reference - n).max(0.0)) / n.max(reference)).clamp(0.0, 1.0)
+                };
+                *o -= eps * factor;
+            }
+        }
+    }
+}
+
 struct Rig {
     synth: actrack_render::synth::SceneSynth,
     geometry: actrack_render::ArmGeometry,
@@ -472,8 +543,24 @@ pub fn run_video(
                     .compute_into(view, &scene.edge_params(img.width()), &mut edges[v])
                     .map_err(|e| Error::Config(format!("frame {frame}: {e}")))?;
             }
-            let obs = SceneObservation::new(scene, &geometry, &likelihood, &edges);
-            let estimate = tracker.step(&obs);
+            let estimate = if let Some(settings) = cond.short_contour_penalty {
+                tracker.step(&ShortContourPenalty {
+                    settings,
+                    geometry: &geometry,
+                    cams: &cams,
+                    scene,
+                    edges: &edges,
+                    gamma: cond.gamma(),
+                    contour: cond.contour,
+                })
+            } else {
+                tracker.step(&SceneObservation::new(
+                    scene,
+                    &geometry,
+                    &likelihood,
+                    &edges,
+                ))
+            };
             step_ms.push(t1.elapsed().as_secs_f64() * 1e3);
             let r = FrameResult {
                 best_world: scene.pose_to_world(&estimate.best_pose),
