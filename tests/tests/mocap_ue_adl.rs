@@ -10,8 +10,8 @@ use std::path::{Path, PathBuf};
 use actrack::manifest::{Manifest, TrainOptions};
 use actrack::mocap::trial::Importer;
 use actrack::train::{
-    Classifier, FractionOf, LabelledTrial, TrialResult, confusion, evaluate, fit_actions,
-    format_confusion, import_trials, quantile,
+    Classifier, FractionOf, LabelledTrial, ThetaFrom, TrialResult, confusion, evaluate,
+    fit_actions, format_confusion, import_trials, quantile,
 };
 
 fn project_root() -> PathBuf {
@@ -57,6 +57,30 @@ fn summarise(
         100.0 * quantile(&errs, 1.0),
         errs.len()
     );
+    println!(
+        "  θ error quantiles 10/25/50/75/90/100 %: {}",
+        [0.1, 0.25, 0.5, 0.75, 0.9, 1.0]
+            .iter()
+            .map(|&q| format!("{:.2}", 100.0 * quantile(&errs, q)))
+            .collect::<Vec<_>>()
+            .join(" / ")
+    );
+    if reach.len() > 1 {
+        for a in reach {
+            let e: Vec<f64> = results
+                .iter()
+                .filter(|r| r.action == *a)
+                .map(|r| r.theta_error)
+                .collect();
+            println!(
+                "  {a}: median {:.2} cm, p90 {:.2} cm, max {:.2} cm (n = {})",
+                100.0 * quantile(&e, 0.5),
+                100.0 * quantile(&e, 0.9),
+                100.0 * quantile(&e, 1.0),
+                e.len()
+            );
+        }
+    }
     print!(
         "{}",
         format_confusion(&confusion(results, actions), actions)
@@ -129,6 +153,13 @@ fn ue_adl_recognition_and_theta() {
 
     let c2 = Classifier::new(&model2).unwrap();
     let c3 = Classifier::new(&model3).unwrap();
+    assert_eq!(c3.theta_from, ThetaFrom::Fingertip);
+    assert_eq!(c3.theta_from_partial, ThetaFrom::Pose);
+    // SPEC §2.6 as written (θ from the whole pose), for comparison.
+    let mut c2_pose = Classifier::new(&model2).unwrap();
+    c2_pose.theta_from = ThetaFrom::Pose;
+    let mut c3_pose = Classifier::new(&model3).unwrap();
+    c3_pose.theta_from = ThetaFrom::Pose;
     let right = |v: &[LabelledTrial]| -> Vec<LabelledTrial> {
         v.iter()
             .filter(|t| t.trial.arm == actrack::mocap::ArmSide::Right)
@@ -165,6 +196,20 @@ fn ue_adl_recognition_and_theta() {
             vec!["reach-forward", "reach-across", "drink"],
             vec!["reach-forward", "reach-across"],
         ),
+        (
+            "2 actions, both arms, θ from the pose",
+            &c2_pose,
+            test2.clone(),
+            vec!["reach", "drink"],
+            vec!["reach"],
+        ),
+        (
+            "3 actions, both arms, θ from the pose",
+            &c3_pose,
+            test3.clone(),
+            vec!["reach-forward", "reach-across", "drink"],
+            vec!["reach-forward", "reach-across"],
+        ),
     ] {
         for (fraction, of) in [
             (1.0, FractionOf::Movement),
@@ -173,8 +218,10 @@ fn ue_adl_recognition_and_theta() {
             (0.75, FractionOf::Recording),
             (0.5, FractionOf::Recording),
         ] {
-            if fraction < 1.0 && (label.ends_with("right arm") || label.starts_with('3')) {
-                continue; // partial sequences: both arms only (keeps the test under a minute)
+            if fraction < 1.0 && (label.ends_with("right arm") || label.ends_with("pose")) {
+                // Partial sequences: both arms, default classifier only (their θ comes from the
+                // pose either way); keeps the test short.
+                continue;
             }
             let res = evaluate(c, &test, fraction, of).unwrap();
             let f = summarise(
@@ -198,10 +245,12 @@ fn ue_adl_recognition_and_theta() {
             }
             continue;
         }
-        // Recognition of whole trials in every split; θ accuracy on the reach-vs-drink split
-        // (the three-action models have half the trials each: reported, not asserted).
+        // Recognition of whole trials in every split; θ accuracy (issue 5: median ≤ 1 cm, p90
+        // ≤ 2 cm) on both splits, both arms, with the default classifier (θ from the
+        // fingertip). θ from the whole pose (SPEC §2.6 as written) is reported, not asserted
+        // (2026-12-02: three actions 1.08 / 2.74 cm).
         assert!(rate >= 0.99, "{label}: recognition {rate}");
-        if label.starts_with('2') {
+        if label.ends_with("both arms") {
             assert!(med <= 0.01, "{label}: median θ error {med}");
             assert!(p90 <= 0.02, "{label}: p90 θ error {p90}");
         }

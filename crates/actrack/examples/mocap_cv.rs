@@ -16,7 +16,10 @@ use std::path::{Path, PathBuf};
 
 use actrack::manifest::{Manifest, TrainOptions};
 use actrack::mocap::trial::Importer;
-use actrack::train::{Classifier, LabelledTrial, fit_actions, import_trials, quantile};
+use actrack::train::{
+    Classifier, FractionOf, LabelledTrial, ThetaFrom, TrialResult, evaluate, fit_actions,
+    import_trials, quantile,
+};
 use actrack_phmm::ThetaEmOptions;
 use nalgebra::DVector;
 
@@ -57,51 +60,29 @@ struct Row {
     recognised_tip: bool,
 }
 
-/// The marginal PHMM of a subset of the observation's coordinates (same A, the sub-blocks of
-/// μ̄, W and Σ).
-fn marginal(m: &actrack_phmm::Phmm, dims: &[usize]) -> actrack_phmm::Phmm {
-    let n = m.n_states();
-    let start: Vec<f64> = (0..n).map(|i| m.start_prob(i)).collect();
-    let a = nalgebra::DMatrix::from_fn(n, n, |i, j| m.transition(i, j));
-    let exit: Vec<f64> = (0..n).map(|i| m.exit_prob(i)).collect();
-    let k = dims.len();
-    let mut bias = Vec::new();
-    let mut w = Vec::new();
-    let mut cov = Vec::new();
-    for i in 0..n {
-        let (b, wi) = m.mean_affine(i);
-        let c = m.covariance(i);
-        bias.push(DVector::from_fn(k, |r, _| b[dims[r]]));
-        w.push(nalgebra::DMatrix::from_fn(k, wi.ncols(), |r, q| {
-            wi[(dims[r], q)]
-        }));
-        cov.push(nalgebra::DMatrix::from_fn(k, k, |r, q| {
-            c[(dims[r], dims[q])]
-        }));
-    }
-    actrack_phmm::Phmm::from_params(
-        &start,
-        &a,
-        &exit,
-        &bias,
-        &w,
-        &cov,
-        m.max_jump(),
-        m.end_mode(),
-    )
-    .expect("marginal model")
-}
-
 fn evaluate_fold(
     train: &[LabelledTrial],
     test: &[LabelledTrial],
     opts: &TrainOptions,
     man: &Manifest,
     multi_start: bool,
+    fractions: &[f64],
+    partial: &mut Vec<(ThetaFrom, f64, TrialResult)>,
 ) -> Vec<Row> {
     let model = fit_actions(train, opts, &man.preprocessing, None, &|_| {}).expect("fit");
     let mut c = Classifier::new(&model).expect("classifier");
     c.multi_start = multi_start;
+    for from in [ThetaFrom::Pose, ThetaFrom::Fingertip] {
+        c.theta_from = from;
+        c.theta_from_partial = from;
+        for &f in fractions {
+            for r in evaluate(&c, test, f, FractionOf::Movement).expect("evaluate") {
+                partial.push((from, f, r));
+            }
+        }
+    }
+    c.theta_from = ThetaFrom::Pose;
+    c.theta_from_partial = ThetaFrom::Pose;
     use rayon::prelude::*;
     test.par_iter()
         .map(|t| {
@@ -120,7 +101,7 @@ fn evaluate_fold(
             };
             let e = a.phmm.estimate_theta(&x, &o).expect("em");
             let sub = |dims: &[usize]| {
-                let mm = marginal(&a.phmm, dims);
+                let mm = a.phmm.marginal(dims).expect("marginal");
                 let xs = nalgebra::DMatrix::from_fn(x.nrows(), dims.len(), |t, k| x[(t, dims[k])]);
                 let o = ThetaEmOptions {
                     init: Some(DVector::from_row_slice(&a.theta_mean)),
@@ -135,7 +116,7 @@ fn evaluate_fold(
             let xs = nalgebra::DMatrix::from_fn(x.nrows(), 3, |t, k| x[(t, tip_dims[k])]);
             let mut best = (f64::NEG_INFINITY, String::new());
             for act in &model.actions {
-                let mm = marginal(&act.phmm, &tip_dims);
+                let mm = act.phmm.marginal(&tip_dims).expect("marginal");
                 let o = ThetaEmOptions {
                     init: Some(DVector::from_row_slice(&act.theta_mean)),
                     multi_start,
@@ -202,6 +183,9 @@ fn main() {
         .map(|s| s.split(',').map(|v| v.parse().expect("states")).collect())
         .unwrap_or_else(|| vec![man.options.states]);
     let multi = flag("--multi-start");
+    let fractions: Vec<f64> = arg("--fractions")
+        .map(|s| s.split(',').map(|v| v.parse().expect("fraction")).collect())
+        .unwrap_or_else(|| vec![1.0]);
     let heldout: Option<Vec<LabelledTrial>> = arg("--heldout").map(|p| {
         let m = Manifest::load(Path::new(&p)).expect("held-out manifest");
         import_trials(&importer, &m.trials, &|_| {}).expect("import held-out")
@@ -213,8 +197,9 @@ fn main() {
                 cov_floor: floor,
                 ..man.options.clone()
             };
+            let mut partial = Vec::new();
             let rows: Vec<Row> = if let Some(test) = &heldout {
-                evaluate_fold(&all, test, &opts, &man, multi)
+                evaluate_fold(&all, test, &opts, &man, multi, &fractions, &mut partial)
             } else {
                 let mut subjects: Vec<u32> = all.iter().map(subject).collect();
                 subjects.sort_unstable();
@@ -226,10 +211,33 @@ fn main() {
                             all.iter().filter(|t| subject(t) != s).cloned().collect();
                         let test: Vec<LabelledTrial> =
                             all.iter().filter(|t| subject(t) == s).cloned().collect();
-                        evaluate_fold(&train, &test, &opts, &man, multi)
+                        evaluate_fold(&train, &test, &opts, &man, multi, &fractions, &mut partial)
                     })
                     .collect()
             };
+            for from in [ThetaFrom::Pose, ThetaFrom::Fingertip] {
+                for &f in &fractions {
+                    let res: Vec<&TrialResult> = partial
+                        .iter()
+                        .filter(|(a, b, _)| *a == from && *b == f)
+                        .map(|(_, _, r)| r)
+                        .collect();
+                    let errs: Vec<f64> = res
+                        .iter()
+                        .filter(|r| r.action.starts_with("reach"))
+                        .map(|r| r.theta_error)
+                        .collect();
+                    println!(
+                        "  classifier, θ from {from:?}, first {:.0} % of the movement: recognition {}/{}; reach θ median {:.2} p90 {:.2} max {:.2} cm",
+                        100.0 * f,
+                        res.iter().filter(|r| r.result.action == r.action).count(),
+                        res.len(),
+                        100.0 * quantile(&errs, 0.5),
+                        100.0 * quantile(&errs, 0.9),
+                        100.0 * quantile(&errs, 1.0)
+                    );
+                }
+            }
             let reach: Vec<&Row> = rows
                 .iter()
                 .filter(|r| r.action.starts_with("reach"))
