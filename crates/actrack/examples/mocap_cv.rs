@@ -22,6 +22,7 @@ use actrack::train::{
 };
 use actrack_phmm::ThetaEmOptions;
 use nalgebra::DVector;
+use rayon::prelude::*;
 
 fn subject(t: &LabelledTrial) -> u32 {
     let name = t
@@ -67,7 +68,7 @@ fn evaluate_fold(
     man: &Manifest,
     multi_start: bool,
     fractions: &[f64],
-    partial: &mut Vec<(ThetaFrom, f64, TrialResult)>,
+    partial: &mut Vec<(ThetaFrom, usize, TrialResult)>,
 ) -> Vec<Row> {
     let model = fit_actions(train, opts, &man.preprocessing, None, &|_| {}).expect("fit");
     let mut c = Classifier::new(&model).expect("classifier");
@@ -75,15 +76,14 @@ fn evaluate_fold(
     for from in [ThetaFrom::Pose, ThetaFrom::Fingertip] {
         c.theta_from = from;
         c.theta_from_partial = from;
-        for &f in fractions {
+        for (k, &f) in fractions.iter().enumerate() {
             for r in evaluate(&c, test, f, FractionOf::Movement).expect("evaluate") {
-                partial.push((from, f, r));
+                partial.push((from, k, r));
             }
         }
     }
     c.theta_from = ThetaFrom::Pose;
     c.theta_from_partial = ThetaFrom::Pose;
-    use rayon::prelude::*;
     test.par_iter()
         .map(|t| {
             let x = t.trial.arm_trajectory.to_matrix();
@@ -162,30 +162,32 @@ fn main() {
     };
     let flag = |name: &str| args.iter().any(|a| a == name);
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
-    let man_path = arg("--manifest")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| root.join("manifests/ue-adl3-train.toml"));
+    let man_path =
+        arg("--manifest").map_or_else(|| root.join("manifests/ue-adl3-train.toml"), PathBuf::from);
     let man = Manifest::load(&man_path).expect("manifest");
     let mut pre = man.preprocessing.clone();
-    if let Some(s) = arg("--trim") {
-        if let Some(t) = pre.trim.as_mut() {
-            t.speed = s.parse().expect("--trim speed");
-        }
+    if let Some(s) = arg("--trim")
+        && let Some(t) = pre.trim.as_mut()
+    {
+        t.speed = s.parse().expect("--trim speed");
     }
     let importer = Importer::new(pre).expect("importer");
     let t0 = std::time::Instant::now();
     let all = import_trials(&importer, &man.trials, &|_| {}).expect("import");
     eprintln!("imported {} trials in {:.1?}", all.len(), t0.elapsed());
-    let floors: Vec<f64> = arg("--floor")
-        .map(|s| s.split(',').map(|v| v.parse().expect("floor")).collect())
-        .unwrap_or_else(|| vec![man.options.cov_floor]);
-    let states: Vec<usize> = arg("--states")
-        .map(|s| s.split(',').map(|v| v.parse().expect("states")).collect())
-        .unwrap_or_else(|| vec![man.options.states]);
+    let floors: Vec<f64> = arg("--floor").map_or_else(
+        || vec![man.options.cov_floor],
+        |s| s.split(',').map(|v| v.parse().expect("floor")).collect(),
+    );
+    let states: Vec<usize> = arg("--states").map_or_else(
+        || vec![man.options.states],
+        |s| s.split(',').map(|v| v.parse().expect("states")).collect(),
+    );
     let multi = flag("--multi-start");
-    let fractions: Vec<f64> = arg("--fractions")
-        .map(|s| s.split(',').map(|v| v.parse().expect("fraction")).collect())
-        .unwrap_or_else(|| vec![1.0]);
+    let fractions: Vec<f64> = arg("--fractions").map_or_else(
+        || vec![1.0],
+        |s| s.split(',').map(|v| v.parse().expect("fraction")).collect(),
+    );
     let heldout: Option<Vec<LabelledTrial>> = arg("--heldout").map(|p| {
         let m = Manifest::load(Path::new(&p)).expect("held-out manifest");
         import_trials(&importer, &m.trials, &|_| {}).expect("import held-out")
@@ -216,10 +218,10 @@ fn main() {
                     .collect()
             };
             for from in [ThetaFrom::Pose, ThetaFrom::Fingertip] {
-                for &f in &fractions {
+                for (k, &f) in fractions.iter().enumerate() {
                     let res: Vec<&TrialResult> = partial
                         .iter()
-                        .filter(|(a, b, _)| *a == from && *b == f)
+                        .filter(|(a, b, _)| *a == from && *b == k)
                         .map(|(_, _, r)| r)
                         .collect();
                     let errs: Vec<f64> = res

@@ -9,22 +9,22 @@ use nalgebra::{DMatrix, DVector};
 /// Three states, d = 3, θ 2-D: coordinate 0 is an "elbow" that moves with θ_u, coordinates 1, 2
 /// a "fingertip" that moves with θ. Full covariances with correlations.
 fn model() -> Phmm {
-    let n = 3;
+    let n: u32 = 3;
     let a = DMatrix::from_row_slice(3, 3, &[0.6, 0.4, 0.0, 0.0, 0.7, 0.3, 0.0, 0.0, 0.8]);
     let exit = [0.0, 0.0, 0.2];
     let start = [1.0, 0.0, 0.0];
     let bias: Vec<DVector<f64>> = (0..n)
-        .map(|i| DVector::from_row_slice(&[0.1 * i as f64, 0.2, -0.1 * i as f64]))
+        .map(|i| DVector::from_row_slice(&[0.1 * f64::from(i), 0.2, -0.1 * f64::from(i)]))
         .collect();
     let weights: Vec<DMatrix<f64>> = (0..n)
         .map(|i| {
-            let s = (i + 1) as f64 / n as f64;
+            let s = f64::from(i + 1) / f64::from(n);
             DMatrix::from_row_slice(3, 2, &[0.5 * s, 0.0, s, 0.0, 0.0, s])
         })
         .collect();
     let covs: Vec<DMatrix<f64>> = (0..n)
         .map(|i| {
-            let v = 1e-4 * (1.0 + i as f64);
+            let v = 1e-4 * (1.0 + f64::from(i));
             DMatrix::from_row_slice(
                 3,
                 3,
@@ -60,10 +60,10 @@ fn model() -> Phmm {
 fn sequence(m: &Phmm, theta: &[f64], offset: f64) -> DMatrix<f64> {
     let mut rows = Vec::new();
     for i in 0..m.n_states() {
-        for k in 0..2 {
+        for k in 0..2_u32 {
             let mut mu = m.mean(i, theta);
             mu[0] += offset;
-            mu[1] += 0.002 * (k as f64 - 0.5);
+            mu[1] += 0.002 * (f64::from(k) - 0.5);
             rows.extend(mu.iter().copied());
         }
     }
