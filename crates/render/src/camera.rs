@@ -214,7 +214,15 @@ impl Camera {
         if xc.z.is_nan() || xc.z <= NEAR_PLANE {
             return None;
         }
-        let (xd, yd) = self.distort(xc.x / xc.z, xc.y / xc.z);
+        let (x, y) = (xc.x / xc.z, xc.y / xc.z);
+        let (xd, yd) = if self.undistorted() {
+            // `distort` with zero coefficients: x·1 + (±0) + (+0), i.e. x + 0 for finite
+            // x, y (a normalised coordinate beyond 1e154, where r² overflows, gives a
+            // non-finite u, v below either way).
+            (x + 0.0, y + 0.0)
+        } else {
+            self.distort(x, y)
+        };
         let uv = Vector2::new(self.fx * xd + self.cx, self.fy * yd + self.cy);
         (uv.x.is_finite() && uv.y.is_finite()).then_some(uv)
     }
@@ -245,6 +253,20 @@ impl Camera {
         }
         let [k1, k2, p1, p2, k3] = self.distortion;
         let (x, y) = (xc.x / xc.z, xc.y / xc.z);
+        if self.undistorted() {
+            // The general formula with zero coefficients (j00 = j11 = 1, j01 = ±0): the same
+            // values, up to the sign of zero entries.
+            let iz = 1.0 / xc.z;
+            let j = Matrix2x3::new(
+                self.fx * iz,
+                0.0,
+                self.fx * (-x * iz),
+                0.0,
+                self.fy * iz,
+                self.fy * (-y * iz),
+            );
+            return j.iter().all(|v| v.is_finite()).then_some(j);
+        }
         let r2 = x * x + y * y;
         let radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
         let d = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2);
@@ -259,6 +281,13 @@ impl Camera {
         j.iter().all(|v| v.is_finite()).then_some(j)
     }
 
+    /// Whether every distortion coefficient is +0 (the projections skip the Brown terms, with
+    /// the same results).
+    #[inline]
+    fn undistorted(&self) -> bool {
+        self.distortion.iter().all(|k| k.to_bits() == 0)
+    }
+
     /// Mean focal length `(f_x + f_y)/2`, used to scale radii to pixels.
     #[inline]
     pub fn mean_focal(&self) -> f64 {
@@ -269,6 +298,7 @@ impl Camera {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use rand::{Rng, SeedableRng};
 
     fn distorted() -> Camera {
         let mut c = Camera::look_at(
@@ -388,6 +418,40 @@ mod tests {
             b[k] -= h;
             let fd = (c.project_camera(&a).unwrap() - c.project_camera(&b).unwrap()) / (2.0 * h);
             assert!((fd.x - j[(0, k)]).abs() < 1e-4 && (fd.y - j[(1, k)]).abs() < 1e-4);
+        }
+    }
+
+    #[test]
+    fn zero_distortion_shortcut_is_the_general_formula() {
+        // k3 = −0 takes the general Brown formula, +0 everywhere the shortcut.
+        let mut c = distorted();
+        c.distortion = [0.0; 5];
+        let mut g = c.clone();
+        g.distortion[4] = -0.0;
+        assert!(c.undistorted() && !g.undistorted());
+        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(3);
+        for _ in 0..2000 {
+            let xc = Vector3::new(
+                rng.random_range(-3.0..3.0),
+                rng.random_range(-3.0..3.0),
+                rng.random_range(-0.5..4.0),
+            );
+            let (a, b) = (c.project_camera(&xc), g.project_camera(&xc));
+            assert_eq!(
+                a.map(|v| v.map(f64::to_bits)),
+                b.map(|v| v.map(f64::to_bits))
+            );
+            assert_eq!(
+                c.project_camera_jacobian(&xc),
+                g.project_camera_jacobian(&xc)
+            );
+        }
+        for xc in [Vector3::new(0.0, -0.0, 1.0), Vector3::new(-0.0, 0.0, 2.0)] {
+            let (a, b) = (
+                c.project_camera(&xc).unwrap(),
+                g.project_camera(&xc).unwrap(),
+            );
+            assert_eq!(a.map(f64::to_bits), b.map(f64::to_bits));
         }
     }
 

@@ -706,10 +706,20 @@ fn finite_coords(v: &Vector2<f64>) -> bool {
     v.x.abs() < MAX_COORD && v.y.abs() < MAX_COORD
 }
 
-/// A truncated cone from a to b (camera frame) clipped to the near plane, as a 2-D capsule.
-fn project_cone(cam: &Camera, a: Vector3<f64>, b: Vector3<f64>, ra: f64, rb: f64) -> Option<Part2> {
+/// A camera-frame point and its projection ([`Camera::project_camera`]).
+type Projection = (Vector3<f64>, Option<Vector2<f64>>);
+
+/// `p` in the camera frame and projected.
+fn projection(cam: &Camera, p: &Vector3<f64>) -> Projection {
+    let c = cam.to_camera(p);
+    (c, cam.project_camera(&c))
+}
+
+/// A truncated cone from a to b (camera frame, with their projections) clipped to the near
+/// plane, as a 2-D capsule.
+fn project_cone(cam: &Camera, a: Projection, b: Projection, ra: f64, rb: f64) -> Option<Part2> {
     let zmin = NEAR_PLANE * 1.000_001;
-    let (mut a, mut b, mut ra, mut rb) = (a, b, ra, rb);
+    let ((mut a, mut pa), (mut b, mut pb), mut ra, mut rb) = (a, b, ra, rb);
     let behind = |z: f64| z.is_nan() || z < zmin;
     if behind(a.z) && behind(b.z) {
         return None;
@@ -719,14 +729,15 @@ fn project_cone(cam: &Camera, a: Vector3<f64>, b: Vector3<f64>, ra: f64, rb: f64
         a += (b - a) * t;
         a.z = zmin;
         ra += (rb - ra) * t;
+        pa = cam.project_camera(&a);
     } else if behind(b.z) {
         let t = (zmin - b.z) / (a.z - b.z);
         b += (a - b) * t;
         b.z = zmin;
         rb += (ra - rb) * t;
+        pb = cam.project_camera(&b);
     }
-    let pa = cam.project_camera(&a)?;
-    let pb = cam.project_camera(&b)?;
+    let (pa, pb) = (pa?, pb?);
     if !(finite_coords(&pa) && finite_coords(&pb)) {
         return None;
     }
@@ -799,7 +810,13 @@ fn ellipse_shape(
     centre: Vector3<f64>,
     axes: &[Vector3<f64>; 3],
 ) -> Option<(Vector2<f64>, f64, f64, [f64; 3])> {
-    let reach = axes.iter().map(nalgebra::Vector3::norm).fold(0.0, f64::max);
+    // The largest norm (one square root: √ is monotonic and correctly rounded, so this is the
+    // largest of the three `norm`s).
+    let reach = axes
+        .iter()
+        .map(nalgebra::Vector3::norm_squared)
+        .fold(0.0, f64::max)
+        .sqrt();
     if centre.z.is_nan() || centre.z - reach <= NEAR_PLANE {
         return None;
     }
@@ -822,6 +839,22 @@ fn ellipse_shape(
     (a.is_finite() && b.is_finite() && a < MAX_COORD).then_some((c, a, b, [s00, s01, s11]))
 }
 
+/// The upper arm and the forearm as 2-D capsules (the elbow, their shared end, is projected
+/// once).
+fn project_cones(cam: &Camera, parts: &crate::arm::ArmParts) -> [Option<Part2>; 2] {
+    let (p, q, r0, r1) = parts.upper;
+    let (_, w, f0, f1) = parts.forearm;
+    let (p, q, w) = (
+        projection(cam, &p),
+        projection(cam, &q),
+        projection(cam, &w),
+    );
+    [
+        project_cone(cam, p, q, r0, r1),
+        project_cone(cam, q, w, f0, f1),
+    ]
+}
+
 /// Projects the three parts of a pose (upper arm, forearm, hand) into the camera. Parts behind
 /// the near plane are clipped (cones) or dropped (the hand). A non-finite pose gives none.
 pub(crate) fn project_prepared(cam: &Camera, geometry: &ArmGeometry, pose: &[f64; 9]) -> Projected {
@@ -829,13 +862,9 @@ pub(crate) fn project_prepared(cam: &Camera, geometry: &ArmGeometry, pose: &[f64
     let Some(parts) = geometry.parts(pose) else {
         return out;
     };
-    let (p, q, r0, r1) = parts.upper;
-    if let Some(part) = project_cone(cam, cam.to_camera(&p), cam.to_camera(&q), r0, r1) {
-        out.push(Prepared::new(&part));
-    }
-    let (q, w, r0, r1) = parts.forearm;
-    if let Some(part) = project_cone(cam, cam.to_camera(&q), cam.to_camera(&w), r0, r1) {
-        out.push(Prepared::new(&part));
+    let [upper, forearm] = project_cones(cam, &parts);
+    for part in upper.iter().chain(&forearm) {
+        out.push(Prepared::new(part));
     }
     let rot = cam.rotation_matrix();
     let axes = parts.hand_axes.map(|a| rot * a);
@@ -852,22 +881,7 @@ pub fn project_parts(camera: &Camera, geometry: &ArmGeometry, pose: &[f64; 9]) -
         return Vec::new();
     };
     let mut out = Vec::with_capacity(3);
-    let (p, q, r0, r1) = parts.upper;
-    out.extend(project_cone(
-        camera,
-        camera.to_camera(&p),
-        camera.to_camera(&q),
-        r0,
-        r1,
-    ));
-    let (q, w, r0, r1) = parts.forearm;
-    out.extend(project_cone(
-        camera,
-        camera.to_camera(&q),
-        camera.to_camera(&w),
-        r0,
-        r1,
-    ));
+    out.extend(project_cones(camera, &parts).into_iter().flatten());
     let rot = camera.rotation_matrix();
     let axes = parts.hand_axes.map(|a| rot * a);
     out.extend(project_ellipsoid(
@@ -2128,7 +2142,6 @@ mod avx2 {
         out: &mut Acc<'_>,
     ) {
         let lane = i32x8(0, 1, 2, 3, 4, 5, 6, 7);
-        let one = s.splat_f32s(1.0);
         let all: m32x8 = pulp::cast([u32::MAX; L8]);
         let (n, tol) = (run.n, run.tol);
         // The sums in registers (the fallback gets no pointer to them). Every sample counts
@@ -2151,7 +2164,6 @@ mod avx2 {
             NOCC >= 1 && meets(&pl.boxes64[0]),
             NOCC >= 2 && meets(&pl.boxes64[1]),
         ];
-        let wmask: i32x8 = pulp::cast([(W - 1) as u32; L8]);
         let (win, base) = (pl.win, pl.base);
         for_each_chunk32(
             s,
@@ -2226,17 +2238,21 @@ mod avx2 {
                     pulp::cast(base),
                 );
                 // Lanes that passed are in the window; the others read some G in it, which
-                // is dropped.
-                let idx: [u32; L8] = pulp::cast(s.avx2._mm256_and_si256(idx, pulp::cast(wmask)));
-                let at = |l: usize| win[idx[l] as usize & (W - 1)];
-                let g = f32x8(at(0), at(1), at(2), at(3), at(4), at(5), at(6), at(7));
+                // is dropped. The indices as four 64-bit pairs: two scalar reads per move out
+                // of the vector register (integer shift and mask, no lane extracts).
+                let idx: [u64; L8 / 2] = pulp::cast(idx);
+                let at = |x: u64| win[x as usize & (W - 1)];
+                // The two halves built apart (no 256-bit insert and extract).
+                let lo = f32x4(at(idx[0]), at(idx[0] >> 32), at(idx[1]), at(idx[1] >> 32));
+                let hi = f32x4(at(idx[2]), at(idx[2] >> 32), at(idx[3]), at(idx[3] >> 32));
                 // Lanes without a sample read G = 1, i.e. add (1 − 1)² = +0, as the f64 loop.
-                let g = if dropped {
-                    s.select_f32s(ok, g, one)
+                let (lo, hi) = if dropped {
+                    let [mlo, mhi]: [pulp::m32x4; 2] = pulp::cast(ok);
+                    let one = s.splat_f32x4(1.0);
+                    (s.select_f32x4(mlo, lo, one), s.select_f32x4(mhi, hi, one))
                 } else {
-                    g
+                    (lo, hi)
                 };
-                let [lo, hi]: [f32x4; 2] = pulp::cast(g);
                 let c = s.splat_f64s(1.0);
                 let e = s.sub_f64s(c, s.convert_f32x4_to_f64x4(lo));
                 sum = s.add_f64s(sum, s.mul_f64s(e, e));
