@@ -264,9 +264,9 @@ pub const FINGERTIP_COORDINATES: [usize; 3] = [6, 7, 8];
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum ThetaFrom {
-    /// The fingertip r only (the default): θ-EM (SPEC §2.6) under the exact marginal model of
-    /// r ([`Phmm::marginal`]); the action is still scored by the likelihood of the whole
-    /// observation at that θ̂.
+    /// The fingertip r only (the default for whole sequences): θ-EM (SPEC §2.6) under the exact
+    /// marginal model of r ([`Phmm::marginal`]); the action is still scored by the likelihood
+    /// of the whole observation at that θ̂.
     ///
     /// Why: θ is the fingertip's table position, but a linear PHMM also predicts the shoulder
     /// and elbow from θ, and those carry the demonstrator's build and seat (arm lengths,
