@@ -1,5 +1,8 @@
 //! The edge image G of SPEC §4.1.
 
+use std::sync::atomic::{AtomicU32, AtomicUsize, Ordering};
+use std::sync::{PoisonError, RwLock, RwLockReadGuard, RwLockWriteGuard};
+
 use crate::{ImageView, RenderError};
 
 /// Parameters of the edge image (SPEC §4.1).
@@ -130,29 +133,73 @@ impl EdgeImage {
 #[derive(Debug, Default, Clone)]
 pub struct EdgeWorkspace {
     mag: Vec<f32>,
-    /// Scratch of every row band (one band per thread of the current rayon pool).
-    bands: Vec<BandScratch>,
+    /// Scratch rows of every worker (one per thread of the current rayon pool).
+    workers: Vec<WorkerScratch>,
     kernel: Vec<f32>,
     kernel_sigma: f32,
+    /// Ring slots of the vertical Gaussian: for output row y, the slots of rows y − r … y + r
+    /// (clamped to the image), `slots[y·(2r+1) + t]`; made for `slots_key` = (h, r).
+    slots: Vec<u32>,
+    slots_key: (usize, usize),
     out: EdgeImage,
 }
 
-/// The scratch rows of one row band: the grey ring of the Sobel pass and the ring of
-/// horizontally smoothed rows of the Gaussian pass.
+/// The scratch rows of one worker: the grey ring of the Sobel pass, the padded row and the
+/// ring of horizontally smoothed rows of the Gaussian pass.
 #[derive(Debug, Default, Clone)]
-struct BandScratch {
+struct WorkerScratch {
     grey: Vec<f32>,
     chan: Vec<f32>,
     sv: Vec<f32>,
     dv: Vec<f32>,
     tmp: Vec<f32>,
     pad: Vec<f32>,
-    rows: Vec<usize>,
 }
 
-/// Fewest rows per band when the edge image is split over threads: smaller images run as one
-/// band (the halos of 1 and ⌈3σ⌉ rows would cost more than the split gains).
-const MIN_BAND_ROWS: usize = 32;
+/// Fewest rows per band of the Sobel pass when the edge image is split over threads (its halo
+/// is one grey row on either side).
+const MIN_SOBEL_ROWS: usize = 16;
+/// Sobel bands per thread: small parts, so that a thread that starts late or is interrupted
+/// leaves its share to the others.
+const SOBEL_BANDS_PER_THREAD: usize = 4;
+/// Fewest rows per band of the Gaussian and normalisation passes (their halo is ⌈3σ⌉ rows on
+/// either side, smoothed horizontally by both neighbours); one band per thread.
+const MIN_GAUSS_ROWS: usize = 32;
+/// Most bands of a pass (their locks live on the stack).
+const MAX_BANDS: usize = 128;
+
+/// How the passes are split into row bands: `sobel_rows` rows per band of the Sobel pass,
+/// `gauss_rows` per band of the Gaussian and normalisation passes (the last band of each
+/// shorter).
+#[derive(Clone, Copy, Debug)]
+struct Split {
+    sobel_rows: usize,
+    gauss_rows: usize,
+}
+
+impl Split {
+    /// The split of an `h`-row image for `threads` threads (one band each on one thread, or
+    /// when the image is too small to gain from more).
+    fn new(h: usize, threads: usize) -> Self {
+        if threads <= 1 {
+            return Self::forced(h, 1, 1);
+        }
+        Self::forced(
+            h,
+            (h / MIN_SOBEL_ROWS).min(SOBEL_BANDS_PER_THREAD * threads),
+            (h / MIN_GAUSS_ROWS).min(threads),
+        )
+    }
+
+    /// About `sobel` and `gauss` bands (at least one, at most one per row and `MAX_BANDS`).
+    fn forced(h: usize, sobel: usize, gauss: usize) -> Self {
+        let rows = |bands: usize| h.div_ceil(bands.clamp(1, h.min(MAX_BANDS)));
+        Self {
+            sobel_rows: rows(sobel),
+            gauss_rows: rows(gauss),
+        }
+    }
+}
 
 /// Largest value of a slice (0 for an empty slice or all values ≤ 0); 8 lanes so that it
 /// vectorises.
@@ -179,12 +226,6 @@ fn max_value(data: &[f32]) -> f32 {
     m
 }
 
-/// The larger of two band maxima (never NaN: `max_value` skips NaN), so the reduction over
-/// bands gives the same value in any order.
-fn max2(a: f32, b: f32) -> f32 {
-    if b > a { b } else { a }
-}
-
 /// Which instruction set the band kernels run with: the best the CPU has (pulp's run-time
 /// dispatch), or pulp's scalar (baseline x86-64) variant for the tests.
 #[derive(Clone, Copy)]
@@ -208,29 +249,80 @@ impl Isa {
     }
 }
 
-/// Runs `f(first_row, rows_of_band, scratch)` on every band of `h`-row image `data` (bands
-/// of `band_rows` rows, the last one shorter) and returns the largest result. One band runs
-/// on the calling thread, several on the current rayon pool.
-fn over_bands<F>(
-    data: &mut [f32],
-    scratch: &mut [BandScratch],
-    band_rows: usize,
-    w: usize,
-    f: F,
-) -> f32
-where
-    F: Fn(usize, &mut [f32], &mut BandScratch) -> f32 + Sync,
-{
-    use rayon::prelude::*;
-    let chunk = band_rows * w;
-    if data.len() <= chunk {
-        return f(0, data, &mut scratch[0]);
+/// The maximum over the bands of a pass, shared by the workers. Band maxima are never negative
+/// or NaN (`max_value`), and for such f32 the order of the bits is the order of the values, so
+/// `fetch_max` on the bits gives the maximum, whatever the order of the bands.
+struct SharedMax(AtomicU32);
+
+impl SharedMax {
+    fn new() -> Self {
+        Self(AtomicU32::new(0))
     }
-    data.par_chunks_mut(chunk)
-        .zip(scratch.par_iter_mut())
-        .enumerate()
-        .map(|(b, (rows, s))| f(b * band_rows, rows, s))
-        .reduce(|| 0.0, max2)
+
+    fn add(&self, v: f32) {
+        self.0.fetch_max(v.to_bits(), Ordering::AcqRel);
+    }
+
+    fn get(&self) -> f32 {
+        f32::from_bits(self.0.load(Ordering::Acquire))
+    }
+}
+
+/// Waits until `count` reaches `target`, i.e. until the other workers have finished the bands
+/// of the previous pass that they claimed (a band is only ever claimed by a worker that
+/// computes it at once, so the wait is short). Spins briefly, then yields the core.
+fn wait_for(count: &AtomicUsize, target: usize) {
+    let mut spins = 0u32;
+    while count.load(Ordering::Acquire) < target {
+        if spins < 2048 {
+            spins += 1;
+            std::hint::spin_loop();
+        } else {
+            std::thread::yield_now();
+        }
+    }
+}
+
+/// Runs `job` once with each of `workers`, in parallel on the current rayon pool (the first on
+/// the calling thread; `rayon::join`, so nothing is allocated).
+fn run_workers<F>(workers: &mut [WorkerScratch], job: &F)
+where
+    F: Fn(&mut WorkerScratch) + Sync,
+{
+    match workers {
+        [] => {}
+        [one] => job(one),
+        [first, rest @ ..] => {
+            rayon::join(|| job(first), || run_workers(rest, job));
+        }
+    }
+}
+
+/// A read lock (a poisoned lock still holds valid numbers: its writers only write values).
+fn read<T>(l: &RwLock<T>) -> RwLockReadGuard<'_, T> {
+    l.read().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// A write lock (see [`read`]).
+fn write<T>(l: &RwLock<T>) -> RwLockWriteGuard<'_, T> {
+    l.write().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// The rows of an image held in bands of `rows` rows of `w` values.
+#[derive(Clone, Copy)]
+struct BandRows<'a> {
+    bands: &'a [&'a [f32]],
+    rows: usize,
+    w: usize,
+}
+
+impl BandRows<'_> {
+    // Inlined into the dispatched band kernels (see `EdgeWorkspace::compute`).
+    #[allow(clippy::inline_always)]
+    #[inline(always)]
+    fn row(&self, y: usize) -> &[f32] {
+        &self.bands[y / self.rows][(y % self.rows) * self.w..][..self.w]
+    }
 }
 
 impl EdgeWorkspace {
@@ -245,12 +337,14 @@ impl EdgeWorkspace {
     /// with clamped borders, normalisation by the maximum. A frame without any gradient gives
     /// G ≡ 0. The result lives in the workspace until the next call (clone it to keep it).
     ///
-    /// The passes are split into row bands, one per thread of the current rayon pool (at least
-    /// 32 rows each): grey + Sobel + max per band (1-row halo), the maximum over bands,
-    /// threshold + horizontal Gaussian + vertical Gaussian + max per band (⌈3σ⌉-row halo,
-    /// recomputed by both neighbours), the maximum over bands, normalisation per band. Every
-    /// value is computed by the same operations whatever the split, and the maxima do not
-    /// depend on the order, so G is bit-identical for every number of threads.
+    /// The passes are split into row bands that the threads of the current rayon pool claim
+    /// in turn, in one `rayon::join` per frame: grey + Sobel + max (four bands per thread of
+    /// at least 16 rows, 1-row halo), threshold + horizontal Gaussian + vertical Gaussian + max
+    /// (one band per thread of at least 32 rows, ⌈3σ⌉-row halo smoothed by both neighbours),
+    /// normalisation (the same bands). A band of one pass starts once every band of the
+    /// previous pass is done and its maximum known. Every value is computed by the same
+    /// operations whatever the split, and the maxima do not depend on the order, so G is
+    /// bit-identical for every number of threads.
     pub fn compute(
         &mut self,
         frame: ImageView<'_>,
@@ -259,19 +353,146 @@ impl EdgeWorkspace {
         frame.validate()?;
         params.validate()?;
         let h = frame.size().1 as usize;
-        let bands = (h / MIN_BAND_ROWS).clamp(1, rayon::current_num_threads().max(1));
+        let threads = rayon::current_num_threads().max(1);
         // The kernels are compiled a second time with AVX2 (+ FMA, BMI, …) and the variant the
         // CPU supports is chosen at run time (pulp; no `target-cpu` flag, so the binaries run on
         // any x86-64); every band of every pass is one dispatched call. Every helper below is
         // `#[inline(always)]` so that it is compiled inside the dispatched function. No FMA
         // contraction happens (Rust never fuses `a * b + c`), so both variants give
         // bit-identical G.
-        self.compute_banded(&frame, params, bands, Isa::Dispatch(pulp::Arch::new()));
+        self.compute_split(
+            &frame,
+            params,
+            Split::new(h, threads),
+            threads,
+            Isa::Dispatch(pulp::Arch::new()),
+        );
         Ok(&self.out)
     }
 
-    /// The body of [`EdgeWorkspace::compute`] on validated input, split into `bands` row bands
-    /// (at most one per row).
+    /// The body of [`EdgeWorkspace::compute`] on validated input, split as `split` and run by
+    /// `threads` workers.
+    fn compute_split(
+        &mut self,
+        frame: &ImageView<'_>,
+        params: &EdgeParams,
+        split: Split,
+        threads: usize,
+        isa: Isa,
+    ) {
+        let (w32, h32) = frame.size();
+        let (w, h) = (w32 as usize, h32 as usize);
+        let n = w * h;
+        let (nb, ng) = (h.div_ceil(split.sobel_rows), h.div_ceil(split.gauss_rows));
+        let threads = threads.max(1);
+        if self.workers.len() < threads {
+            self.workers.resize_with(threads, WorkerScratch::default);
+        }
+        self.mag.resize(n, 0.0);
+        self.out.width = w32;
+        self.out.height = h32;
+        self.out.data.resize(n, 0.0);
+        if params.sigma > 0.0 {
+            self.make_kernel(params.sigma);
+            self.make_slots(h);
+        }
+        let frame = *frame;
+        let (kernel, slots) = (&self.kernel[..], &self.slots[..]);
+        let (sigma, tau, binary) = (params.sigma, params.tau, params.binary);
+        // Every band behind its own lock: written by the one worker that claims it, read by
+        // the next pass (the Gaussian reads its neighbours' magnitudes too).
+        let mut bands = self.mag.chunks_mut(split.sobel_rows * w);
+        let mag: [RwLock<&mut [f32]>; MAX_BANDS] =
+            std::array::from_fn(|_| RwLock::new(bands.next().unwrap_or_default()));
+        let mut bands = self.out.data.chunks_mut(split.gauss_rows * w);
+        let out: [RwLock<&mut [f32]>; MAX_BANDS] =
+            std::array::from_fn(|_| RwLock::new(bands.next().unwrap_or_default()));
+        // Bands are numbered pass by pass (Sobel 0 … nb − 1, Gaussian nb … nb + ng − 1,
+        // normalisation after them) and claimed in that order.
+        let next = AtomicUsize::new(0);
+        let done = [AtomicUsize::new(0), AtomicUsize::new(0)];
+        let (max_g, max_out) = (SharedMax::new(), SharedMax::new());
+        let job = |ws: &mut WorkerScratch| {
+            loop {
+                let i = next.fetch_add(1, Ordering::Relaxed);
+                if i < nb {
+                    let mut m = write(&mag[i]);
+                    max_g.add(isa.run(SobelBand {
+                        s: ws,
+                        frame: &frame,
+                        y0: i * split.sobel_rows,
+                        h,
+                        mag: &mut m,
+                    }));
+                    drop(m);
+                    done[0].fetch_add(1, Ordering::AcqRel);
+                } else if i < nb + ng {
+                    wait_for(&done[0], nb);
+                    let mg = max_g.get();
+                    let b = i - nb;
+                    let mut o = write(&out[b]);
+                    if mg > 0.0 && mg.is_finite() {
+                        let guards: [Option<RwLockReadGuard<'_, &mut [f32]>>; MAX_BANDS] =
+                            std::array::from_fn(|j| (j < nb).then(|| read(&mag[j])));
+                        let slices: [&[f32]; MAX_BANDS] =
+                            std::array::from_fn(|j| guards[j].as_deref().map_or(&[][..], |g| g));
+                        let mag = BandRows {
+                            bands: &slices[..nb],
+                            rows: split.sobel_rows,
+                            w,
+                        };
+                        let thr = Threshold {
+                            inv: 1.0 / mg,
+                            tau,
+                            binary,
+                        };
+                        let y0 = b * split.gauss_rows;
+                        max_out.add(if sigma > 0.0 {
+                            isa.run(GaussBand {
+                                s: ws,
+                                mag,
+                                k: kernel,
+                                slots,
+                                w,
+                                h,
+                                y0,
+                                out: &mut o,
+                                thr,
+                            })
+                        } else {
+                            isa.run(ThresholdBand {
+                                mag,
+                                y0,
+                                out: &mut o,
+                                thr,
+                            })
+                        });
+                    }
+                    drop(o);
+                    done[1].fetch_add(1, Ordering::AcqRel);
+                } else if i < nb + 2 * ng {
+                    wait_for(&done[1], ng);
+                    let (mg, mo) = (max_g.get(), max_out.get());
+                    let mut o = write(&out[i - nb - ng]);
+                    if mg > 0.0 && mg.is_finite() && mo > 0.0 {
+                        isa.run(ScaleBand {
+                            out: &mut o,
+                            inv: 1.0 / mo,
+                        });
+                    } else {
+                        o.fill(0.0);
+                    }
+                } else {
+                    break;
+                }
+            }
+        };
+        run_workers(&mut self.workers[..threads], &job);
+    }
+
+    /// [`EdgeWorkspace::compute_split`] with `bands` bands in every pass, on the calling
+    /// thread (the tests' forced splits).
+    #[cfg(test)]
     fn compute_banded(
         &mut self,
         frame: &ImageView<'_>,
@@ -279,86 +500,8 @@ impl EdgeWorkspace {
         bands: usize,
         isa: Isa,
     ) {
-        let (w32, h32) = frame.size();
-        let (w, h) = (w32 as usize, h32 as usize);
-        let n = w * h;
-        let band_rows = h.div_ceil(bands.min(h).max(1));
-        let nb = h.div_ceil(band_rows);
-        if self.bands.len() < nb {
-            self.bands.resize_with(nb, BandScratch::default);
-        }
-        self.mag.resize(n, 0.0);
-        self.out.width = w32;
-        self.out.height = h32;
-        self.out.data.resize(n, 0.0);
-        let frame = *frame;
-        let max_g = over_bands(
-            &mut self.mag,
-            &mut self.bands,
-            band_rows,
-            w,
-            |y0, mag, s| {
-                isa.run(SobelBand {
-                    s,
-                    frame: &frame,
-                    y0,
-                    h,
-                    mag,
-                })
-            },
-        );
-        if max_g <= 0.0 || !max_g.is_finite() {
-            self.out.data.fill(0.0);
-            return;
-        }
-        let thr = Threshold {
-            inv: 1.0 / max_g,
-            tau: params.tau,
-            binary: params.binary,
-        };
-        if params.sigma > 0.0 {
-            self.make_kernel(params.sigma);
-        }
-        let (mag, kernel) = (&self.mag[..], &self.kernel[..]);
-        let sigma = params.sigma;
-        let max_out = over_bands(
-            &mut self.out.data,
-            &mut self.bands,
-            band_rows,
-            w,
-            |y0, out, s| {
-                if sigma > 0.0 {
-                    isa.run(GaussBand {
-                        s,
-                        mag,
-                        k: kernel,
-                        w,
-                        h,
-                        y0,
-                        out,
-                        thr,
-                    })
-                } else {
-                    isa.run(ThresholdBand {
-                        mag: &mag[y0 * w..][..out.len()],
-                        out,
-                        thr,
-                    })
-                }
-            },
-        );
-        if max_out > 0.0 {
-            let inv = 1.0 / max_out;
-            over_bands(
-                &mut self.out.data,
-                &mut self.bands,
-                band_rows,
-                w,
-                |_, out, _| isa.run(ScaleBand { out, inv }),
-            );
-        } else {
-            self.out.data.fill(0.0);
-        }
+        let h = frame.size().1 as usize;
+        self.compute_split(frame, params, Split::forced(h, bands, bands), 1, isa);
     }
 
     /// [`EdgeWorkspace::compute`] into `out` without copying: the result's buffer is swapped
@@ -379,6 +522,24 @@ impl EdgeWorkspace {
     /// holds the caller's previous image).
     pub fn edge_image(&self) -> &EdgeImage {
         &self.out
+    }
+
+    /// The ring slots of every output row of the vertical Gaussian (see `slots`): row yy lives
+    /// in slot yy mod (2r + 1).
+    fn make_slots(&mut self, h: usize) {
+        let r = self.kernel.len() - 1;
+        if self.slots_key == (h, r) && !self.slots.is_empty() {
+            return;
+        }
+        let ring = 2 * r + 1;
+        self.slots.clear();
+        for y in 0..h {
+            for t in 0..ring {
+                let yy = (y + t).saturating_sub(r).min(h - 1);
+                self.slots.push((yy % ring) as u32);
+            }
+        }
+        self.slots_key = (h, r);
     }
 
     fn make_kernel(&mut self, sigma: f32) {
@@ -407,7 +568,7 @@ impl EdgeWorkspace {
 /// power of two, so it cancels exactly (bit for bit) in the normalisation by max(g) that
 /// follows.
 struct SobelBand<'a, 'f> {
-    s: &'a mut BandScratch,
+    s: &'a mut WorkerScratch,
     frame: &'a ImageView<'f>,
     y0: usize,
     h: usize,
@@ -488,9 +649,10 @@ impl pulp::WithSimd for SobelBand<'_, '_> {
 /// 2r+1 rows that the vertical pass reads, so the intermediate image never leaves the cache;
 /// the r rows above and below the band are smoothed horizontally by this band as well.
 struct GaussBand<'a> {
-    s: &'a mut BandScratch,
-    mag: &'a [f32],
+    s: &'a mut WorkerScratch,
+    mag: BandRows<'a>,
     k: &'a [f32],
+    slots: &'a [u32],
     w: usize,
     h: usize,
     y0: usize,
@@ -509,6 +671,7 @@ impl pulp::WithSimd for GaussBand<'_> {
             s,
             mag,
             k,
+            slots,
             w,
             h,
             y0,
@@ -519,14 +682,13 @@ impl pulp::WithSimd for GaussBand<'_> {
         let ring = 2 * r + 1;
         s.tmp.resize(ring * w, 0.0);
         s.pad.resize(w + 2 * r, 0.0);
-        s.rows.resize(ring, 0);
         // Row `yy` lives in ring slot `yy mod ring`.
         let mut next = y0.saturating_sub(r);
         let mut slot = next % ring;
         let mut lanes = [0f32; 8];
         for y in y0..y0 + out.len() / w {
             while next <= (y + r).min(h - 1) {
-                let src = &mag[next * w..][..w];
+                let src = mag.row(next);
                 let pad = &mut s.pad[..];
                 for (p, &g) in pad[r..r + w].iter_mut().zip(src) {
                     *p = thr.apply(g);
@@ -534,24 +696,13 @@ impl pulp::WithSimd for GaussBand<'_> {
                 let (first, last) = (pad[r], pad[r + w - 1]);
                 pad[..r].fill(first);
                 pad[r + w..].fill(last);
-                // The slot of row `next`, tracked without a division.
                 gauss_row(&s.pad, k, &mut s.tmp[slot * w..][..w]);
                 next += 1;
+                // The slot of row `next`, tracked without a division.
                 slot = if slot + 1 == ring { 0 } else { slot + 1 };
             }
-            // Ring offsets of rows y−r … y+r (clamped): slot(yy) = (slot(y) + yy − y) mod ring,
-            // with one division per output row.
-            let sy = y % ring;
-            for (t, o) in s.rows.iter_mut().enumerate() {
-                let yy = (y + t).saturating_sub(r).min(h - 1);
-                let mut sl = sy + yy + ring - y;
-                while sl >= ring {
-                    sl -= ring;
-                }
-                *o = sl * w;
-            }
             let dst = &mut out[(y - y0) * w..][..w];
-            gauss_col(&s.tmp, &s.rows, k, dst);
+            gauss_col(&s.tmp, &slots[y * ring..][..ring], k, dst);
             let m = max_value(dst);
             lanes[y % 8] = if m > lanes[y % 8] { m } else { lanes[y % 8] };
         }
@@ -559,9 +710,10 @@ impl pulp::WithSimd for GaussBand<'_> {
     }
 }
 
-/// Threshold only (σ = 0) `mag → out` of one band; returns max(out).
+/// Threshold only (σ = 0) of the band's rows `y0 …` into `out`; returns max(out).
 struct ThresholdBand<'a> {
-    mag: &'a [f32],
+    mag: BandRows<'a>,
+    y0: usize,
     out: &'a mut [f32],
     thr: Threshold,
 }
@@ -573,10 +725,13 @@ impl pulp::WithSimd for ThresholdBand<'_> {
     #[allow(clippy::inline_always)]
     #[inline(always)]
     fn with_simd<S: pulp::Simd>(self, _simd: S) -> f32 {
-        for (o, &g) in self.out.iter_mut().zip(self.mag) {
-            *o = self.thr.apply(g);
+        let Self { mag, y0, out, thr } = self;
+        for (dy, row) in out.chunks_exact_mut(mag.w).enumerate() {
+            for (o, &g) in row.iter_mut().zip(mag.row(y0 + dy)) {
+                *o = thr.apply(g);
+            }
         }
-        max_value(self.out)
+        max_value(out)
     }
 }
 
@@ -698,17 +853,17 @@ fn gauss_row(pad: &[f32], k: &[f32], dst: &mut [f32]) {
     }
 }
 
-/// Vertical Gaussian of one output row from the rows at offsets `rows` (y−r … y+r) of `src`.
-/// Whole rows at a time, two pairs of taps per sweep: every sweep streams four source rows
-/// sequentially (friendlier to the prefetcher than 2r+1 interleaved streams) and the output row
-/// stays in L1.
+/// Vertical Gaussian of one output row from the rows in ring slots `slots` (rows y−r … y+r,
+/// `dst.len()` values per slot) of `src`. Whole rows at a time, two pairs of taps per sweep:
+/// every sweep streams four source rows sequentially (friendlier to the prefetcher than 2r+1
+/// interleaved streams) and the output row stays in L1.
 // Inlined into the dispatched `compute_kernels` (see there).
 #[allow(clippy::inline_always)]
 #[inline(always)]
-fn gauss_col(src: &[f32], rows: &[usize], k: &[f32], dst: &mut [f32]) {
+fn gauss_col(src: &[f32], slots: &[u32], k: &[f32], dst: &mut [f32]) {
     let r = k.len() - 1;
     let w = dst.len();
-    let row = |t: usize| &src[rows[t]..rows[t] + w];
+    let row = |t: usize| &src[slots[t] as usize * w..][..w];
     for (o, &c) in dst.iter_mut().zip(row(r)) {
         *o = k[0] * c;
     }
@@ -955,6 +1110,46 @@ mod tests {
                     let mut ws = EdgeWorkspace::new();
                     let got = pool.install(|| ws.compute(frame, p).unwrap().clone());
                     assert_eq!(got, g, "{w}×{h} {p:?}, {threads} threads");
+                }
+            }
+        }
+    }
+
+    /// Different band counts for the Sobel and the Gaussian passes, run by several workers on
+    /// pools of 1–3 threads (more workers than threads included: a worker that finds every
+    /// band claimed returns), give the same G as one band.
+    #[test]
+    fn workers_and_mixed_splits_give_identical_g() {
+        let params = variant_params();
+        for &(w, h) in &[(45usize, 37usize), (131, 97), (5, 70), (17, 2)] {
+            let rgb = test_frame(w, h);
+            let frame = ImageView::rgb8(&rgb, w as u32, h as u32).unwrap();
+            for p in &params {
+                let mut one = EdgeWorkspace::new();
+                one.compute_banded(&frame, p, 1, Isa::Dispatch(pulp::Arch::new()));
+                let mut ws = EdgeWorkspace::new();
+                for threads in [1, 2, 3] {
+                    let pool = rayon::ThreadPoolBuilder::new()
+                        .num_threads(threads)
+                        .build()
+                        .unwrap();
+                    for (sobel, gauss) in [(8, 2), (3, 5), (1, 4), (h, 1), (h, h)] {
+                        for workers in [1, 2, 4] {
+                            pool.install(|| {
+                                ws.compute_split(
+                                    &frame,
+                                    p,
+                                    Split::forced(h, sobel, gauss),
+                                    workers,
+                                    Isa::Dispatch(pulp::Arch::new()),
+                                );
+                            });
+                            assert_eq!(
+                                ws.out, one.out,
+                                "{w}×{h} {p:?}, {sobel}/{gauss} bands, {workers} workers, {threads} threads"
+                            );
+                        }
+                    }
                 }
             }
         }
