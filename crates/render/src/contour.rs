@@ -1287,7 +1287,7 @@ mod avx2 {
         data: &'a [f32],
         /// The row stride, for the f64 chunks (fallback) and the f32 ones.
         stride: f64x4,
-        stride_i: i32x8,
+        stride_f: f32x8,
         sum: f64x4,
         /// Number of samples.
         n: usize,
@@ -1772,7 +1772,7 @@ mod avx2 {
                 simd: s,
                 data: self.data,
                 stride: s.splat_f64s(self.stride as f64),
-                stride_i: pulp::cast([self.stride as i32; L8]),
+                stride_f: s.splat_f32s(self.stride as f32),
                 sum: s.splat_f64s(0.0),
                 n: 0,
             };
@@ -1780,6 +1780,13 @@ mod avx2 {
                 a[0] <= b[2] && b[0] <= a[2] && a[1] <= b[3] && b[1] <= a[3]
             };
             let base = (a[1] * self.stride as f64 + a[0]) as i32;
+            // Pixel indices relative to the anchor, `(v − a_v)·stride + (u − a_u)`, are
+            // integers below 2²⁴ in magnitude for every pixel of the image (and so exact in
+            // f32) unless the parts reach far outside a large image (then the f64 loop).
+            let exact = (a[1].abs() + f64::from(self.height) + 1.0) * self.stride as f64
+                + a[0].abs()
+                + f64::from(self.width)
+                < f64::from(1u32 << 24);
             let bounds = [
                 -a[0] as f32,
                 -a[1] as f32,
@@ -1815,7 +1822,7 @@ mod avx2 {
                 let y1 = (bb[3] + 2.0).floor().min(f64::from(self.height));
                 let rows = (y1 - y0).max(0.0) * self.stride as f64;
                 let lo = y0 as usize * self.stride;
-                let fits = |w: usize| self.data.len() >= w && rows <= w as f64;
+                let fits = |w: usize| exact && self.data.len() >= w && rows <= w as f64;
                 let shrink = |k: usize| {
                     let b = &boxes[oi[k]];
                     [
@@ -2228,15 +2235,12 @@ mod avx2 {
                     count += k;
                     return;
                 }
-                let px = s.avx._mm256_cvttps_epi32(pulp::cast(ru));
-                let py = s.avx._mm256_cvttps_epi32(pulp::cast(rv));
-                let idx = s.avx2._mm256_add_epi32(
-                    s.avx2._mm256_add_epi32(
-                        s.avx2._mm256_mullo_epi32(py, pulp::cast(acc.stride_i)),
-                        px,
-                    ),
-                    pulp::cast(base),
-                );
+                // The index relative to the anchor in f32: exact for every lane in the image
+                // (integers below 2²⁴, see `exact`), one conversion.
+                let rel = s.mul_add_e_f32s(rv, acc.stride_f, ru);
+                let idx = s
+                    .avx2
+                    ._mm256_add_epi32(s.avx._mm256_cvttps_epi32(pulp::cast(rel)), pulp::cast(base));
                 // Lanes that passed are in the window; the others read some G in it, which
                 // is dropped. The indices as four 64-bit pairs: two scalar reads per move out
                 // of the vector register (integer shift and mask, no lane extracts).
