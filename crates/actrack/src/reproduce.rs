@@ -394,7 +394,7 @@ impl actrack_pf::ObservationModel for ShortContourPenalty<'_> {
         let factor = 1.0 / (2.0 * self.gamma * self.gamma);
         out.fill(0.0);
         for (cam, edge) in self.cams.iter().zip(self.edges) {
-            let (w, h) = (edge.width() as i64, edge.height() as i64);
+            let (w, h) = (i64::from(edge.width()), i64::from(edge.height()));
             let g = edge.data();
             let sums: Vec<(f64, usize)> = poses
                 .par_iter()

@@ -138,6 +138,42 @@ fn train_inspect_classify_synthetic() {
     let th = v["trials"][0]["theta"].as_array().unwrap();
     assert!((th[0].as_f64().unwrap() + 0.1).abs() < 0.03, "{th:?}");
     assert!((th[1].as_f64().unwrap() - 0.7).abs() < 0.03, "{th:?}");
+
+    // SPEC §2.6 as written (θ from the whole pose) recognises and locates it as well; the
+    // estimate is a different one (other coordinates enter the EM).
+    let o = cli(
+        dir.path(),
+        &[
+            "classify",
+            "--model",
+            "m.actrack.json",
+            "--trial",
+            "data/reach_12.csv",
+            "--theta-from",
+            "pose",
+            "--json",
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let w: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(w["trials"][0]["recognised"], "reach");
+    let tp = w["trials"][0]["theta"].as_array().unwrap();
+    assert!((tp[0].as_f64().unwrap() + 0.1).abs() < 0.03, "{tp:?}");
+    assert!((tp[1].as_f64().unwrap() - 0.7).abs() < 0.03, "{tp:?}");
+    assert_ne!(tp, th, "--theta-from pose gave the fingertip's estimate");
+    let o = cli(
+        dir.path(),
+        &[
+            "classify",
+            "--model",
+            "m.actrack.json",
+            "--trial",
+            "data/reach_12.csv",
+            "--theta-from",
+            "elbow",
+        ],
+    );
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
 }
 
 #[test]

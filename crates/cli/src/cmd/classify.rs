@@ -10,8 +10,8 @@ use actrack::mocap::ArmSide;
 use actrack::mocap::trial::Importer;
 use actrack::model::ActionModel;
 use actrack::train::{
-    Classifier, FractionOf, TrialResult, confusion, evaluate, format_confusion, import_trials,
-    quantile,
+    Classifier, FractionOf, ThetaFrom, TrialResult, confusion, evaluate, format_confusion,
+    import_trials, quantile,
 };
 
 /// Options of `classify`.
@@ -56,9 +56,23 @@ pub struct Args {
     /// the best log-likelihood (slower; partial sequences always use several starts).
     #[arg(long)]
     pub multi_start: bool,
+    /// Whole sequences: which coordinates θ-EM uses (`fingertip`: the fingertip's marginal
+    /// model, the default; `pose`: shoulder, elbow and fingertip, SPEC §2.6 as written). The
+    /// action is scored by the whole pose either way; partial sequences always use the pose.
+    #[arg(long, value_enum, default_value = "fingertip")]
+    pub theta_from: ThetaSource,
     /// Print JSON.
     #[arg(long)]
     pub json: bool,
+}
+
+/// The coordinates θ-EM uses for whole sequences.
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub enum ThetaSource {
+    /// The fingertip only (its marginal model).
+    Fingertip,
+    /// The whole pose (SPEC §2.6).
+    Pose,
 }
 
 /// The θ prior for partial sequences.
@@ -126,6 +140,10 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
     let mut classifier = Classifier::with_partial_inflation(&model, args.partial_sigma)?;
     classifier.partial_prior = matches!(args.partial_prior, PartialPrior::Training);
     classifier.multi_start = args.multi_start;
+    classifier.theta_from = match args.theta_from {
+        ThetaSource::Fingertip => ThetaFrom::Fingertip,
+        ThetaSource::Pose => ThetaFrom::Pose,
+    };
     let of = match args.fraction_of {
         Of::Movement => FractionOf::Movement,
         Of::Recording => FractionOf::Recording,
