@@ -363,9 +363,6 @@ pub fn tracker_config(model: &ActionModel, cond: &Condition) -> Result<TrackerCo
         .map_err(|e| Error::Config(format!("tracker: {e}")))
 }
 
-/// What rendering and scoring a condition in a scene needs: the scene synthesis with the
-/// condition's clutter and noise (body kept), the arm geometry, the render cameras and the
-/// observation model with the condition's γ and contour method.
 /// An experimental observation model (not SPEC §4.3): SPEC's ε̄ is a mean over the contour's
 /// points, so a pose whose contour is short (a forearm foreshortened towards the camera, a hand
 /// at the mouth seen end-on) can lie on a few strong edges of the torso or head and beat the
@@ -433,6 +430,9 @@ impl actrack_pf::ObservationModel for ShortContourPenalty<'_> {
     }
 }
 
+/// What rendering and scoring a condition in a scene needs: the scene synthesis with the
+/// condition's clutter and noise (body kept), the arm geometry, the render cameras and the
+/// observation model with the condition's γ and contour method.
 struct Rig {
     synth: actrack_render::synth::SceneSynth,
     geometry: actrack_render::ArmGeometry,
@@ -986,5 +986,92 @@ mod tests {
         assert!((set.gamma() - 0.2).abs() < 1e-12);
         assert_eq!(mono.second_camera, CAMERA1);
         assert!(mono.body);
+    }
+
+    /// The short-contour penalty equals SPEC's likelihood when no contour is shorter than the
+    /// reference (q = 0: the shortest), and with the longest as reference (q = 1) lowers the
+    /// score of exactly the poses with shorter contours.
+    #[test]
+    fn short_contour_penalty_against_spec() {
+        let o = Vector3::from(SHOULDER);
+        let scene = Scene {
+            cameras: vec![camera("camera0", CAMERA0.0, CAMERA0.1).unwrap()],
+            table: TableRegion {
+                placement: Placement {
+                    origin: Vector3::new(o.x, o.y + 0.5, o.z - TABLE_BELOW_SHOULDER),
+                    yaw: 0.0,
+                },
+                half_extents: [0.3, 0.2],
+            },
+            actor: Placement {
+                origin: o,
+                yaw: 0.0,
+            },
+            side: Side::Right,
+            arm: ArmGeometry::default(),
+            edges: EdgeSettings::default(),
+        };
+        let lengths = [0.30, 0.46];
+        let cond = Condition::monocular("t");
+        let Rig {
+            synth,
+            geometry,
+            cams,
+            likelihood,
+        } = rig(&scene, &cond, lengths).unwrap();
+        let img = synth
+            .render(&cams[0], &scene.pose_to_world(&POSES[1]), 3)
+            .unwrap();
+        let mut edges = vec![EdgeImage::default()];
+        EdgeWorkspace::new()
+            .compute_into(
+                ImageView::rgb8(&img.data, img.width, img.height).unwrap(),
+                &scene.edge_params(img.width),
+                &mut edges[0],
+            )
+            .unwrap();
+        let mut poses = POSES.to_vec();
+        for p in &mut poses {
+            actrack_render::correct_arm(&geometry, p, None);
+        }
+        let spec = SceneObservation::new(&scene, &geometry, &likelihood, &edges);
+        let mut want = vec![0.0; poses.len()];
+        actrack_pf::ObservationModel::log_likelihoods(&spec, &poses, &mut want);
+        let lens: Vec<usize> = poses
+            .iter()
+            .map(|p| {
+                contour_points(&cams[0], &geometry, &scene.pose_to_world(p), cond.contour).len()
+            })
+            .collect();
+        assert!(lens.iter().min() < lens.iter().max(), "{lens:?}");
+        let score = |settings: [f64; 2]| {
+            let pen = ShortContourPenalty {
+                geometry: &geometry,
+                cams: &cams,
+                scene: &scene,
+                edges: &edges,
+                gamma: cond.gamma(),
+                contour: cond.contour,
+                settings,
+            };
+            let mut out = vec![0.0; poses.len()];
+            actrack_pf::ObservationModel::log_likelihoods(&pen, &poses, &mut out);
+            out
+        };
+        for (a, b) in score([1.0, 0.0]).iter().zip(&want) {
+            assert!((a - b).abs() < 1e-9, "{a} vs SPEC {b}");
+        }
+        let longest = *lens.iter().max().unwrap();
+        for ((a, b), n) in score([1.0, 1.0]).iter().zip(&want).zip(&lens) {
+            assert!(a.is_finite());
+            if *n == longest {
+                assert!((a - b).abs() < 1e-9, "{a} vs SPEC {b}");
+            } else {
+                assert!(
+                    a < b,
+                    "contour of {n} < {longest} points not penalised: {a} vs {b}"
+                );
+            }
+        }
     }
 }
