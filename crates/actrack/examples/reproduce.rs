@@ -94,6 +94,15 @@ fn list(s: Option<String>) -> Vec<String> {
         .collect()
 }
 
+/// `N` comma-separated numbers, or exit 2 with `usage`.
+fn floats<const N: usize>(s: Option<String>, usage: &str) -> [f64; N] {
+    let v: Vec<f64> = list(s).iter().filter_map(|x| x.parse().ok()).collect();
+    v.try_into().unwrap_or_else(|_| {
+        eprintln!("reproduce: {usage}");
+        std::process::exit(2);
+    })
+}
+
 fn args() -> Args {
     let mut a = Args {
         out: PathBuf::from("target/repro"),
@@ -129,30 +138,17 @@ fn args() -> Args {
             }
             "--train-subjects" => a.train_subjects = Some(list(it.next())),
             "--camera1" => {
-                let v: Vec<f64> = list(it.next())
-                    .iter()
-                    .filter_map(|x| x.parse().ok())
-                    .collect();
-                if v.len() == 6 {
-                    a.camera1 = Some(([v[0], v[1], v[2]], [v[3], v[4], v[5]]));
-                } else {
-                    eprintln!("reproduce: --camera1 wants ex,ey,ez,tx,ty,tz");
-                    std::process::exit(2);
-                }
+                let [ex, ey, ez, tx, ty, tz] =
+                    floats(it.next(), "--camera1 wants ex,ey,ez,tx,ty,tz");
+                a.camera1 = Some(([ex, ey, ez], [tx, ty, tz]));
             }
             "--gamma2" => a.gamma2 = it.next().and_then(|x| x.parse().ok()),
             "--no-body" => a.no_body = true,
             "--short-contour-penalty" => {
-                let v: Vec<f64> = list(it.next())
-                    .iter()
-                    .filter_map(|x| x.parse().ok())
-                    .collect();
-                if v.len() == 2 {
-                    a.penalty = Some([v[0], v[1]]);
-                } else {
-                    eprintln!("reproduce: --short-contour-penalty wants λ,q (e.g. 1,0.5)");
-                    std::process::exit(2);
-                }
+                a.penalty = Some(floats(
+                    it.next(),
+                    "--short-contour-penalty wants λ,q (e.g. 1,0.5)",
+                ));
             }
             "--gamma" => a.gamma = it.next().and_then(|x| x.parse().ok()),
             "--particles" => a.particles = it.next().and_then(|x| x.parse().ok()),

@@ -373,11 +373,9 @@ pub fn tracker_config(model: &ActionModel, cond: &Condition) -> Result<TrackerCo
 /// part).
 pub struct ShortContourPenalty<'a> {
     geometry: &'a actrack_render::ArmGeometry,
-    cams: &'a [actrack_render::Camera],
+    likelihood: &'a LikelihoodModel,
     scene: &'a Scene,
     edges: &'a [EdgeImage],
-    gamma: f64,
-    contour: ContourMethod,
     /// λ and q.
     settings: [f64; 2],
 }
@@ -388,28 +386,19 @@ impl actrack_pf::ObservationModel for ShortContourPenalty<'_> {
     }
 
     fn log_likelihoods(&self, poses: &[[f64; 9]], out: &mut [f64]) {
-        let factor = 1.0 / (2.0 * self.gamma * self.gamma);
+        let gamma = self.likelihood.gamma();
+        let factor = 1.0 / (2.0 * gamma * gamma);
         out.fill(0.0);
-        for (cam, edge) in self.cams.iter().zip(self.edges) {
-            let (w, h) = (i64::from(edge.width()), i64::from(edge.height()));
-            let g = edge.data();
+        for (view, edge) in self.edges.iter().enumerate() {
             let sums: Vec<(f64, usize)> = poses
                 .par_iter()
-                .map(|p| {
+                .map_init(actrack_render::RenderScratch::new, |scratch, p| {
                     let world = self.scene.pose_to_world(p);
-                    if !world.iter().all(|x| x.is_finite()) {
-                        return (0.0, 0);
+                    if world.iter().all(|x| x.is_finite()) {
+                        self.likelihood.view_sum(view, edge, &world, scratch)
+                    } else {
+                        (0.0, 0)
                     }
-                    let (mut s, mut n) = (0.0f64, 0usize);
-                    for c in contour_points(cam, self.geometry, &world, self.contour) {
-                        let (u, v) = (c[0].round() as i64, c[1].round() as i64);
-                        if u >= 0 && v >= 0 && u < w && v < h {
-                            let e = 1.0 - f64::from(g[(v * w + u) as usize]);
-                            s += e * e;
-                            n += 1;
-                        }
-                    }
-                    (s, n)
                 })
                 .collect();
             let mut lens: Vec<usize> = sums.iter().map(|x| x.1).filter(|&n| n > 0).collect();
@@ -547,11 +536,9 @@ pub fn run_video(
                 tracker.step(&ShortContourPenalty {
                     settings,
                     geometry: &geometry,
-                    cams: &cams,
+                    likelihood: &likelihood,
                     scene,
                     edges: &edges,
-                    gamma: cond.gamma(),
-                    contour: cond.contour,
                 })
             } else {
                 tracker.step(&SceneObservation::new(
@@ -1047,11 +1034,9 @@ mod tests {
         let score = |settings: [f64; 2]| {
             let pen = ShortContourPenalty {
                 geometry: &geometry,
-                cams: &cams,
+                likelihood: &likelihood,
                 scene: &scene,
                 edges: &edges,
-                gamma: cond.gamma(),
-                contour: cond.contour,
                 settings,
             };
             let mut out = vec![0.0; poses.len()];

@@ -159,8 +159,26 @@ impl LikelihoodModel {
         pose: &[f64; 9],
         scratch: &mut RenderScratch,
     ) -> f64 {
+        let (sum, count) = self.view_sum(view, edge, pose, scratch);
+        if count == 0 {
+            1.0
+        } else {
+            (sum / count as f64).clamp(0.0, 1.0)
+        }
+    }
+
+    /// Σ (1 − G)² over the pose's contour points in one view and their number (the parts of
+    /// [`LikelihoodModel::view_error`]; `(0, 0)` for a missing view), for likelihoods that
+    /// weigh the contour's length differently from SPEC's mean.
+    pub fn view_sum(
+        &self,
+        view: usize,
+        edge: &EdgeImage,
+        pose: &[f64; 9],
+        scratch: &mut RenderScratch,
+    ) -> (f64, usize) {
         let Some(cam) = self.cameras.get(view) else {
-            return 1.0;
+            return (0.0, 0);
         };
         let (w, h) = (cam.width.min(edge.width()), cam.height.min(edge.height()));
         let parts = project_prepared(cam, &self.geometry, pose);
@@ -191,11 +209,7 @@ impl LikelihoodModel {
                 };
             }
         }
-        if count == 0 {
-            1.0
-        } else {
-            (sum / count as f64).clamp(0.0, 1.0)
-        }
+        (sum, count)
     }
 
     /// log P(I | x̃) with an explicit scratch (no validation of `edges`; call
