@@ -580,7 +580,11 @@ impl Prepared {
         #[allow(clippy::inline_always)]
         #[inline(always)]
         fn arc_n(r: f64, sweep: f64, step: f64) -> usize {
-            ((r * sweep / step).ceil() as usize).clamp(1, 4096)
+            // Clamped in f64 (NaN gives 1, as the saturating conversion and the integer
+            // `clamp` did; f64 `clamp` would keep NaN), so the conversion is a plain one.
+            #[allow(clippy::manual_clamp)]
+            let n = (r * sweep / step).ceil().max(1.0).min(4096.0);
+            n as u32 as usize
         }
         // A clockwise arc (u right, v down: decreasing angle) of radius `r` around `c` from the
         // unit direction `from`, the end point excluded.
@@ -596,7 +600,7 @@ impl Prepared {
         ) {
             let n = arc_n(r, sweep, step);
             let w = Vector2::new(from.y, -from.x) * r;
-            sink.trig(c, from * r, w, sweep / n as f64, n, true);
+            sink.trig(c, from * r, w, sweep / f64::from(n as u32), n, true);
         }
         match *self {
             Self::Circle { c, r } => arc(sink, step, c, r, Vector2::x(), std::f64::consts::TAU),
@@ -607,7 +611,7 @@ impl Prepared {
                     c,
                     ea * a,
                     -eb * b,
-                    std::f64::consts::TAU / n as f64,
+                    std::f64::consts::TAU / f64::from(n as u32),
                     n,
                     false,
                 );
@@ -625,7 +629,9 @@ impl Prepared {
             } => {
                 let np = d * sin_a + n * cos_a;
                 let nm = d * sin_a - n * cos_a;
-                let m = ((len * cos_a / step).ceil() as usize).clamp(1, 1 << 16);
+                // As `arc_n`: NaN gives 1.
+                #[allow(clippy::manual_clamp)]
+                let m = (len * cos_a / step).ceil().max(1.0).min(65_536.0) as u32 as usize;
                 let half = std::f64::consts::PI;
                 let alpha = sin_a.asin();
                 sink.line(c0 + np * r0, c1 + np * r1, m);
@@ -1343,15 +1349,37 @@ mod avx2 {
 
     impl Shape32 {
         /// Per lane: (surely deep, surely not deep) in the f64 test.
+        #[cfg(test)]
         #[allow(clippy::inline_always)]
         #[inline(always)]
         fn test(&self, s: V3, x: f32x8, y: f32x8) -> (m32x8, m32x8) {
+            let (nd, no) = self.test_not(s, x, y);
+            (s.not_m32s(nd), s.not_m32s(no))
+        }
+
+        /// Per lane: (not surely deep, not surely outside) in the f64 test, i.e. the
+        /// complements of [`Shape32::test`] (the loop uses them as they are: fewer
+        /// negations).
+        #[allow(clippy::inline_always)]
+        #[inline(always)]
+        fn test_not(&self, s: V3, x: f32x8, y: f32x8) -> (m32x8, m32x8) {
             let sp = |a: f32| s.splat_f32s(a);
-            match *self {
-                Self::Never => (pulp::cast([0u32; L8]), pulp::cast([u32::MAX; L8])),
+            // `(q ≥ lo, q ≤ hi)`: not below the lower threshold, not above the upper one.
+            let not_below_above = |q: f32x8, th: &[f32; 2]| {
+                (
+                    s.greater_than_or_equal_f32s(q, sp(th[0])),
+                    s.less_than_or_equal_f32s(q, sp(th[1])),
+                )
+            };
+            // `m ∧ ¬d` (one `vandnps`).
+            let andnot = |d: m32x8, m: m32x8| -> m32x8 {
+                pulp::cast(s.avx._mm256_andnot_ps(pulp::cast(d), pulp::cast(m)))
+            };
+            match self {
+                Self::Never => (pulp::cast([u32::MAX; L8]), pulp::cast([0u32; L8])),
                 Self::Disc { c, r2 } => {
                     let (dx, dy) = (s.sub_f32s(x, sp(c[0])), s.sub_f32s(y, sp(c[1])));
-                    below_above(s, norm2(s, dx, dy), r2)
+                    not_below_above(norm2(s, dx, dy), r2)
                 }
                 Self::Capsule {
                     c0,
@@ -1371,8 +1399,8 @@ mod avx2 {
                     let sd = dot(s, rx, ry, d);
                     let f = s.mul_add_e_f32s(
                         sd,
-                        sp(sin_a),
-                        s.mul_f32s(s.abs_f32s(dot(s, rx, ry, n)), sp(cos_a)),
+                        sp(*sin_a),
+                        s.mul_f32s(s.abs_f32s(dot(s, rx, ry, n)), sp(*cos_a)),
                     );
                     let (side_deep, side_out) = below_above(s, f, lim);
                     let (cap0_deep, cap0_out) = below_above(s, norm2(s, rx, ry), r0sq);
@@ -1384,26 +1412,22 @@ mod avx2 {
                         s.greater_than_or_equal_f32s(sd, sp(lo[0])),
                         s.less_than_or_equal_f32s(sd, sp(hi[1])),
                     );
-                    // Sure when it holds in every region that may be selected.
-                    let (n0, ns, n1) = (
-                        s.not_m32s(maybe0),
-                        s.not_m32s(maybe_side),
-                        s.not_m32s(maybe1),
+                    // Sure when it holds in every region that may be selected: not sure when
+                    // some region may be selected in which it does not hold.
+                    let not_deep = s.or_m32s(
+                        s.or_m32s(andnot(cap0_deep, maybe0), andnot(side_deep, maybe_side)),
+                        andnot(cap1_deep, maybe1),
                     );
-                    let deep = s.and_m32s(
-                        s.and_m32s(s.or_m32s(n0, cap0_deep), s.or_m32s(ns, side_deep)),
-                        s.or_m32s(n1, cap1_deep),
+                    let not_out = s.or_m32s(
+                        s.or_m32s(andnot(cap0_out, maybe0), andnot(side_out, maybe_side)),
+                        andnot(cap1_out, maybe1),
                     );
-                    let out = s.and_m32s(
-                        s.and_m32s(s.or_m32s(n0, cap0_out), s.or_m32s(ns, side_out)),
-                        s.or_m32s(n1, cap1_out),
-                    );
-                    (deep, out)
+                    (not_deep, not_out)
                 }
                 Self::Ellipse { c, ea, eb, k2 } => {
                     let (rx, ry) = (s.sub_f32s(x, sp(c[0])), s.sub_f32s(y, sp(c[1])));
                     let (xa, xb) = (dot(s, rx, ry, ea), dot(s, rx, ry, eb));
-                    below_above(s, norm2(s, xa, xb), k2)
+                    not_below_above(norm2(s, xa, xb), k2)
                 }
             }
         }
@@ -1412,7 +1436,7 @@ mod avx2 {
     /// `a·b` of two-vector lanes and a constant.
     #[allow(clippy::inline_always)]
     #[inline(always)]
-    fn dot(s: V3, ax: f32x8, ay: f32x8, b: [f32; 2]) -> f32x8 {
+    fn dot(s: V3, ax: f32x8, ay: f32x8, b: &[f32; 2]) -> f32x8 {
         s.mul_add_e_f32s(ax, s.splat_f32s(b[0]), s.mul_f32s(ay, s.splat_f32s(b[1])))
     }
 
@@ -1426,7 +1450,7 @@ mod avx2 {
     /// `(q < lo, q > hi)` per lane.
     #[allow(clippy::inline_always)]
     #[inline(always)]
-    fn below_above(s: V3, q: f32x8, th: [f32; 2]) -> (m32x8, m32x8) {
+    fn below_above(s: V3, q: f32x8, th: &[f32; 2]) -> (m32x8, m32x8) {
         (
             s.less_than_f32s(q, s.splat_f32s(th[0])),
             s.greater_than_f32s(q, s.splat_f32s(th[1])),
@@ -1501,7 +1525,7 @@ mod avx2 {
         fn line(a: [f64; 2], p: Vector2<f64>, q: Vector2<f64>, n: usize) -> Self {
             let (x0, y0) = (p.x - a[0], p.y - a[1]);
             let (x1, y1) = (q.x - a[0], q.y - a[1]);
-            let st = (q - p) / n as f64;
+            let st = (q - p) / f64::from(n as u32);
             let m = 1e-3;
             Self {
                 samples: Gen32::Line {
@@ -1543,7 +1567,7 @@ mod avx2 {
             let si1 = s.add_f64s(s.mul_f64s(si0, c4v), s.mul_f64s(co0, s4v));
             let (c8, s8) = ((c4 * c4 - s4 * s4) as f32, (2.0 * c4 * s4) as f32);
             let r = u.x.abs() + u.y.abs() + w.x.abs() + w.y.abs();
-            let steps = (n / L8 + 2) as f64;
+            let steps = f64::from((n / L8 + 2) as u32);
             let samples = if circle {
                 Gen32::Arc {
                     c: [cx as f32, cy as f32],
@@ -1598,6 +1622,8 @@ mod avx2 {
     impl Shape32 {
         /// The part's test ([`Inside::new`] of it) relative to the anchor `a`; `t`: bound
         /// (pixels) of the error of the f32 sample positions and of this test's arithmetic.
+        #[allow(clippy::inline_always)]
+        #[inline(always)]
         fn of_part(part: &Prepared, a: [f64; 2], t: f64) -> Self {
             let pair_sq = |r: f64| {
                 if r <= super::INSIDE_TOL {
@@ -1821,7 +1847,7 @@ mod avx2 {
                 let y0 = (bb[1] - 1.0).floor().max(0.0);
                 let y1 = (bb[3] + 2.0).floor().min(f64::from(self.height));
                 let rows = (y1 - y0).max(0.0) * self.stride as f64;
-                let lo = y0 as usize * self.stride;
+                let lo = y0 as u32 as usize * self.stride;
                 let fits = |w: usize| exact && self.data.len() >= w && rows <= w as f64;
                 let shrink = |k: usize| {
                     let b = &boxes[oi[k]];
@@ -2214,11 +2240,12 @@ mod avx2 {
                         s.less_than_or_equal_f32s(v, ob[3]),
                     );
                     if bits(s, s.and_m32s(ok, s.and_m32s(inx, iny))) != 0 {
-                        let (deep, out) = pl.shapes[k].test(s, u, v);
-                        amb = s.or_m32s(amb, s.and_m32s(ok, s.not_m32s(s.or_m32s(deep, out))));
-                        let drop = s.and_m32s(ok, deep);
-                        count -= bits(s, drop).count_ones() as usize;
-                        ok = s.and_m32s(ok, s.not_m32s(deep));
+                        let (not_deep, not_out) = pl.shapes[k].test_not(s, u, v);
+                        amb = s.or_m32s(amb, s.and_m32s(ok, s.and_m32s(not_deep, not_out)));
+                        // Dropped: the lanes that passed so far and are surely deep.
+                        let kept = s.and_m32s(ok, not_deep);
+                        count -= (bits(s, ok) ^ bits(s, kept)).count_ones() as usize;
+                        ok = kept;
                         dropped = true;
                     }
                 }
