@@ -10,7 +10,7 @@
 //! repetitions 1 and 3 instead of the held-out subjects), `--camera1 ex,ey,ez,tx,ty,tz` (the
 //! second camera, actor frame), `--gamma2 G` (γ of the two-view run), `--no-body` (no torso and
 //! head in the synthesis), `--particles N`, `--contour raster|analytic`, `--gamma G` and
-//! `--short-contour-penalty λ,q` (override every selected condition's), `--diag` (per-view ε̄ of the true pose against perturbed poses and
+//! `--short-contour-penalty λ,q`, `--speed-range LO,HI`, `--local-norm R,FLOOR`, `--penalty-long`, `--seed N` (override every selected condition's), `--diag` (per-view ε̄ of the true pose against perturbed poses and
 //! the share of its contour the body hides; no tracking), `--trace NAME` (per-frame track and
 //! per-view ε̄ of truth and best particle) with `--dump DIR` (views of a few frames).
 
@@ -55,6 +55,14 @@ struct Args {
     gamma: Option<f64>,
     /// Score with the experimental short-contour penalty (`ShortContourPenalty`).
     penalty: Option<[f64; 2]>,
+    /// Override every selected condition's per-particle speed range.
+    speed_range: Option<[f64; 2]>,
+    /// The short-contour penalty's sum form for long contours too.
+    penalty_long: bool,
+    /// Override every selected condition's seed (filter and backgrounds).
+    seed: Option<u64>,
+    /// Local normalisation of G (radius px, floor) in every selected condition.
+    local_norm: Option<[f64; 2]>,
     /// Per-view likelihood diagnosis of the selected trials (no tracking).
     diag: bool,
     /// Print the per-frame track of the trials whose name contains this.
@@ -76,6 +84,10 @@ impl Args {
             || self.contour.is_some()
             || self.gamma.is_some()
             || self.penalty.is_some()
+            || self.speed_range.is_some()
+            || self.local_norm.is_some()
+            || self.penalty_long
+            || self.seed.is_some()
             || self.diag
     }
 
@@ -117,6 +129,10 @@ fn args() -> Args {
         contour: None,
         gamma: None,
         penalty: None,
+        speed_range: None,
+        local_norm: None,
+        penalty_long: false,
+        seed: None,
         diag: false,
         trace: None,
         dump: None,
@@ -150,6 +166,17 @@ fn args() -> Args {
                     "--short-contour-penalty wants λ,q (e.g. 1,0.5)",
                 ));
             }
+            "--speed-range" => {
+                a.speed_range = Some(floats(it.next(), "--speed-range wants LO,HI (e.g. 0.8,2)"));
+            }
+            "--local-norm" => {
+                a.local_norm = Some(floats(
+                    it.next(),
+                    "--local-norm wants R,FLOOR (e.g. 24,0.1)",
+                ));
+            }
+            "--penalty-long" => a.penalty_long = true,
+            "--seed" => a.seed = it.next().and_then(|x| x.parse().ok()),
             "--gamma" => a.gamma = it.next().and_then(|x| x.parse().ok()),
             "--particles" => a.particles = it.next().and_then(|x| x.parse().ok()),
             "--contour" => {
@@ -449,6 +476,20 @@ fn error_breakdown(runs: &[VideoRun]) {
     }
 }
 
+/// Per-component RMSE of the reported pose of one video, per joint (p, q, r; metres).
+fn joint_rms(run: &VideoRun) -> [f64; 3] {
+    let mut e = [0.0; 3];
+    for (t, k) in run.truth.rows.iter().zip(&run.track.rows) {
+        for (j, ej) in e.iter_mut().enumerate() {
+            *ej += (0..3)
+                .map(|c| (k.pose[3 * j + c] - t.pose[3 * j + c]).powi(2))
+                .sum::<f64>();
+        }
+    }
+    let n = 3.0 * run.truth.rows.len().max(1) as f64;
+    e.map(|x| (x / n).sqrt())
+}
+
 /// Prints a tracked video frame by frame (`--trace`): fingertip of the truth, the reported
 /// (median-filtered) pose and the best particle (actor frame, cm), θ̄ against θ, θ std, the
 /// posterior.
@@ -526,6 +567,10 @@ fn dump(
                 &scene.edge_params(img.width()),
                 &mut e,
             )?;
+            if let Some(ln) = &c.local_norm {
+                let spec = e.clone();
+                actrack_render::local_normalise(&spec, ln, &mut Default::default(), &mut e)?;
+            }
             let g = image::GrayImage::from_fn(img.width(), img.height(), |x, y| {
                 image::Luma([(255.0 * e.data()[(y * img.width() + x) as usize]) as u8])
             });
@@ -675,6 +720,16 @@ fn main() -> Res<()> {
             contour: a.contour.unwrap_or(c.contour),
             gamma: a.gamma.or(c.gamma),
             short_contour_penalty: a.penalty.or(c.short_contour_penalty),
+            speed_range: a.speed_range.or(c.speed_range),
+            local_norm: a
+                .local_norm
+                .map(|[r, f]| actrack_render::LocalNorm {
+                    radius: r as u32,
+                    floor: f as f32,
+                })
+                .or(c.local_norm),
+            penalty_long: a.penalty_long || c.penalty_long,
+            seed: a.seed.unwrap_or(c.seed),
             ..c
         };
         let (r, runs) = run_condition(m, tr, &c)?;
@@ -730,9 +785,10 @@ fn main() -> Res<()> {
             println!("{}", row(&r));
             error_breakdown(&runs);
             eprintln!("  joints in view {:.1} %", 100.0 * r.in_view);
-            for (t, i) in tr.iter().zip(&r.report.instances) {
+            for ((t, i), run) in tr.iter().zip(&r.report.instances).zip(&runs) {
+                let rms = joint_rms(run);
                 eprintln!(
-                    "  {} {}: predicted {}, table {} cm, θ {} cm, fingertip error {} / {} / {} cm",
+                    "  {} {}: predicted {}, table {} cm, θ {} cm, fingertip error {} / {} / {} cm, RMSE p / q / r {} / {} / {} cm",
                     t.name,
                     i.action,
                     i.predicted,
@@ -741,6 +797,9 @@ fn main() -> Res<()> {
                     cm(i.fingertip_error[0]),
                     cm(i.fingertip_error[1]),
                     cm(i.fingertip_error[2]),
+                    cm(rms[0]),
+                    cm(rms[1]),
+                    cm(rms[2]),
                 );
             }
             return Ok(());

@@ -321,15 +321,19 @@ pub fn prepare(opts: &BenchOptions, n_frames: usize) -> Result<Prepared> {
     let cams: Vec<_> = scene.cameras.iter().map(render_camera).collect();
     let frames = poses
         .par_iter()
-        .map(|p| {
-            cams.iter()
-                .map(|c| {
-                    synth
-                        .render(c, p, opts.seed)
-                        .map_err(|e| Error::Config(format!("bench: rendering a frame: {e}")))
-                })
-                .collect::<Result<Vec<_>>>()
-        })
+        .map_init(
+            || vec![actrack_render::synth::SynthCache::default(); cams.len()],
+            |caches, p| {
+                cams.iter()
+                    .zip(caches.iter_mut())
+                    .map(|(c, cache)| {
+                        synth
+                            .render_cached(cache, c, p, opts.seed)
+                            .map_err(|e| Error::Config(format!("bench: rendering a frame: {e}")))
+                    })
+                    .collect::<Result<Vec<_>>>()
+            },
+        )
         .collect::<Result<Vec<_>>>()?;
     Ok(Prepared {
         scene,

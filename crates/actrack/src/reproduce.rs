@@ -249,6 +249,12 @@ pub struct Condition {
     /// Score poses with [`ShortContourPenalty`] of this weight λ and quantile q instead of
     /// SPEC's ε̄ (an experiment, not the paper's likelihood).
     pub short_contour_penalty: Option<[f64; 2]>,
+    /// Divide each view's G by its local maximum ([`actrack_render::LocalNorm`]; an extension,
+    /// not SPEC §4.1); `None`: SPEC's G.
+    pub local_norm: Option<actrack_render::LocalNorm>,
+    /// With `short_contour_penalty`: contours longer than n̄ are scored by the same sum form
+    /// (they gain for each point below λ) instead of SPEC's mean.
+    pub penalty_long: bool,
 }
 
 impl Condition {
@@ -271,6 +277,8 @@ impl Condition {
             gamma: None,
             body: true,
             short_contour_penalty: None,
+            local_norm: None,
+            penalty_long: false,
         }
     }
 
@@ -378,6 +386,8 @@ pub struct ShortContourPenalty<'a> {
     edges: &'a [EdgeImage],
     /// λ and q.
     settings: [f64; 2],
+    /// Whether contours longer than n̄ use the sum form too.
+    long: bool,
 }
 
 impl actrack_pf::ObservationModel for ShortContourPenalty<'_> {
@@ -410,10 +420,44 @@ impl actrack_pf::ObservationModel for ShortContourPenalty<'_> {
                 let n = n as f64;
                 let eps = if n == 0.0 {
                     1.0
+                } else if self.long && reference > 0.0 {
+                    (weight + (s - weight * n) / reference).clamp(0.0, 1.0)
                 } else {
                     ((s + weight * (reference - n).max(0.0)) / n.max(reference)).clamp(0.0, 1.0)
                 };
                 *o -= eps * factor;
+            }
+        }
+    }
+}
+
+/// The edge image of one view as a condition computes it: SPEC §4.1, then (with
+/// `Condition::local_norm`) the local normalisation. Buffers are reused across frames.
+#[derive(Default)]
+struct EdgeStage {
+    ws: EdgeWorkspace,
+    local: actrack_render::LocalNormScratch,
+    spec: EdgeImage,
+}
+
+impl EdgeStage {
+    fn compute(
+        &mut self,
+        view: ImageView<'_>,
+        scene: &Scene,
+        cond: &Condition,
+        frame: usize,
+        out: &mut EdgeImage,
+    ) -> Result<()> {
+        let params = scene.edge_params(view.size().0);
+        let err = |e: actrack_render::RenderError| Error::Config(format!("frame {frame}: {e}"));
+        match &cond.local_norm {
+            None => self.ws.compute_into(view, &params, out).map_err(err),
+            Some(ln) => {
+                self.ws
+                    .compute_into(view, &params, &mut self.spec)
+                    .map_err(err)?;
+                actrack_render::local_normalise(&self.spec, ln, &mut self.local, out).map_err(err)
             }
         }
     }
@@ -484,7 +528,8 @@ pub fn run_video(
         context: "building the tracker".into(),
         message: e.to_string(),
     })?;
-    let mut workspaces: Vec<EdgeWorkspace> = cams.iter().map(|_| EdgeWorkspace::new()).collect();
+    let mut workspaces: Vec<EdgeStage> = cams.iter().map(|_| EdgeStage::default()).collect();
+    let mut synth_caches = vec![actrack_render::synth::SynthCache::default(); cams.len()];
     let mut edges: Vec<EdgeImage> = cams.iter().map(|_| EdgeImage::default()).collect();
     let mut track = Trajectory {
         actions: names.clone(),
@@ -515,7 +560,12 @@ pub fn run_video(
                     }
                 }
                 let img = synth
-                    .render(cam, &world, cond.seed.wrapping_add(v as u64))
+                    .render_cached(
+                        &mut synth_caches[v],
+                        cam,
+                        &world,
+                        cond.seed.wrapping_add(v as u64),
+                    )
                     .map_err(|e| Error::Config(format!("synth: frame {frame}: {e}")))?;
                 images.push(
                     RgbImage::from_raw(img.width, img.height, img.data).ok_or_else(|| {
@@ -528,13 +578,12 @@ pub fn run_video(
             for (v, img) in images.iter().enumerate() {
                 let view = ImageView::rgb8(img.as_raw(), img.width(), img.height())
                     .map_err(|e| Error::Config(format!("frame {frame}: {e}")))?;
-                workspaces[v]
-                    .compute_into(view, &scene.edge_params(img.width()), &mut edges[v])
-                    .map_err(|e| Error::Config(format!("frame {frame}: {e}")))?;
+                workspaces[v].compute(view, scene, cond, frame, &mut edges[v])?;
             }
             let estimate = if let Some(settings) = cond.short_contour_penalty {
                 tracker.step(&ShortContourPenalty {
                     settings,
+                    long: cond.penalty_long,
                     geometry: &geometry,
                     likelihood: &likelihood,
                     scene,
@@ -767,7 +816,7 @@ pub fn diagnose_views(
     bare.body = None;
     let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(cond.seed ^ 0xd1a9);
     let mut scratch = actrack_render::RenderScratch::new();
-    let mut ws = EdgeWorkspace::new();
+    let mut ws = EdgeStage::default();
     let mut edge = EdgeImage::default();
     let eye0 = scene.cameras[0].centre();
     let mut out = Vec::new();
@@ -820,8 +869,7 @@ pub fn diagnose_views(
                 .map_err(|e| Error::Config(format!("synth: frame {frame}: {e}")))?;
             let view = ImageView::rgb8(&img.data, img.width, img.height)
                 .map_err(|e| Error::Config(format!("frame {frame}: {e}")))?;
-            ws.compute_into(view, &scene.edge_params(img.width), &mut edge)
-                .map_err(|e| Error::Config(format!("frame {frame}: {e}")))?;
+            ws.compute(view, &scene, cond, frame, &mut edge)?;
             let contour = contour_points(cam, &geometry, &world, cond.contour);
             let w = img.width as usize;
             let hidden = contour
@@ -893,8 +941,9 @@ pub fn view_errors(
         synth.body = None;
     }
     let mut scratch = actrack_render::RenderScratch::new();
-    let mut ws = EdgeWorkspace::new();
+    let mut ws = EdgeStage::default();
     let mut edges: Vec<EdgeImage> = cams.iter().map(|_| EdgeImage::default()).collect();
+    let mut synth_caches = vec![actrack_render::synth::SynthCache::default(); cams.len()];
     let mut out = Vec::new();
     for (frame, pose) in trial.poses.iter().enumerate() {
         let mut truth = *pose;
@@ -902,12 +951,16 @@ pub fn view_errors(
         let world = scene.pose_to_world(pose);
         for (v, cam) in cams.iter().enumerate() {
             let img = synth
-                .render(cam, &world, cond.seed.wrapping_add(v as u64))
+                .render_cached(
+                    &mut synth_caches[v],
+                    cam,
+                    &world,
+                    cond.seed.wrapping_add(v as u64),
+                )
                 .map_err(|e| Error::Config(format!("synth: frame {frame}: {e}")))?;
             let view = ImageView::rgb8(&img.data, img.width, img.height)
                 .map_err(|e| Error::Config(format!("frame {frame}: {e}")))?;
-            ws.compute_into(view, &scene.edge_params(img.width), &mut edges[v])
-                .map_err(|e| Error::Config(format!("frame {frame}: {e}")))?;
+            ws.compute(view, &scene, cond, frame, &mut edges[v])?;
         }
         let poses: Vec<[f64; 9]> = std::iter::once(scene.pose_to_world(&truth))
             .chain(candidates.iter().filter_map(|c| c.get(frame).copied()))
@@ -1038,6 +1091,7 @@ mod tests {
                 scene: &scene,
                 edges: &edges,
                 settings,
+                long: false,
             };
             let mut out = vec![0.0; poses.len()];
             actrack_pf::ObservationModel::log_likelihoods(&pen, &poses, &mut out);

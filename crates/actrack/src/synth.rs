@@ -149,13 +149,16 @@ pub fn render_frames(
     poses_world
         .par_iter()
         .enumerate()
-        .map(|(i, p)| {
-            let img = synth
-                .render(&cam, p, seed)
-                .map_err(|e| Error::Config(format!("synth: frame {i}: {e}")))?;
-            RgbImage::from_raw(img.width, img.height, img.data)
-                .ok_or_else(|| Error::Config(format!("synth: frame {i}: bad image buffer")))
-        })
+        .map_init(
+            actrack_render::synth::SynthCache::default,
+            |cache, (i, p)| {
+                let img = synth
+                    .render_cached(cache, &cam, p, seed)
+                    .map_err(|e| Error::Config(format!("synth: frame {i}: {e}")))?;
+                RgbImage::from_raw(img.width, img.height, img.data)
+                    .ok_or_else(|| Error::Config(format!("synth: frame {i}: bad image buffer")))
+            },
+        )
         .collect()
 }
 

@@ -87,6 +87,11 @@ impl EdgeImage {
         &self.data
     }
 
+    /// The values, row-major, by value (to reuse the buffer).
+    pub fn into_data(self) -> Vec<f32> {
+        self.data
+    }
+
     /// G at integer pixel (u, v); `None` outside the image.
     #[inline]
     pub fn get(&self, u: i64, v: i64) -> Option<f32> {

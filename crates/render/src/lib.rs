@@ -62,6 +62,7 @@ mod error;
 pub mod gpu;
 mod image;
 mod likelihood;
+mod local_norm;
 pub mod synth;
 
 pub use arm::{ArmGeometry, ArmParts, correct_arm};
@@ -73,6 +74,7 @@ pub use error::RenderError;
 pub use gpu::{GpuError, GpuLikelihood};
 pub use image::{ImageRgb8, ImageView};
 pub use likelihood::{LikelihoodModel, SamplingMode};
+pub use local_norm::{LocalNorm, LocalNormScratch, local_normalise};
 
 /// An arm pose as it crosses crate boundaries: (p shoulder xyz, q elbow xyz, r fingertip xyz),
 /// metres, world frame.

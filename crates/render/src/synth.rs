@@ -115,17 +115,51 @@ impl SceneSynth {
         pose: &[f64; 9],
         seed: u64,
     ) -> Result<ImageRgb8, RenderError> {
+        self.render_cached(&mut SynthCache::default(), camera, pose, seed)
+    }
+
+    /// [`SceneSynth::render`] for a stream of frames: the parts that do not depend on the pose
+    /// (background, clutter, table, and the noise field, which the seed fixes) are drawn once
+    /// into `cache` and reused while `self`, `camera` and `seed` stay the same. The bytes are
+    /// those of [`SceneSynth::render`].
+    pub fn render_cached(
+        &self,
+        cache: &mut SynthCache,
+        camera: &Camera,
+        pose: &[f64; 9],
+        seed: u64,
+    ) -> Result<ImageRgb8, RenderError> {
         camera.validate()?;
         self.geometry.validate()?;
         let (w, h) = (camera.width, camera.height);
-        let mut pix = Pixmap::new(w, h)
-            .ok_or_else(|| RenderError::InvalidImage(format!("cannot allocate a {w}×{h} frame")))?;
-        let mut rng = Pcg64Mcg::seed_from_u64(seed);
-        background(&mut pix, &mut rng);
-        clutter(&mut pix, &mut rng, self.clutter);
-        if let Some(t) = &self.table {
-            self.draw_table(&mut pix, camera, t);
+        let fresh = cache
+            .layer
+            .as_ref()
+            .is_none_or(|l| l.synth != *self || l.camera != *camera || l.seed != seed);
+        if fresh {
+            cache.layer = None;
+            let mut pix = Pixmap::new(w, h).ok_or_else(|| {
+                RenderError::InvalidImage(format!("cannot allocate a {w}×{h} frame"))
+            })?;
+            let mut rng = Pcg64Mcg::seed_from_u64(seed);
+            background(&mut pix, &mut rng);
+            clutter(&mut pix, &mut rng, self.clutter);
+            if let Some(t) = &self.table {
+                self.draw_table(&mut pix, camera, t);
+            }
+            let noise = noise_field(pix.data().len() / 4 * 3, self.noise_sigma, &mut rng);
+            cache.layer = Some(Layer {
+                synth: self.clone(),
+                camera: camera.clone(),
+                seed,
+                pix,
+                noise,
+            });
         }
+        let Some(layer) = cache.layer.as_ref() else {
+            return Err(RenderError::InvalidImage("synthesis cache is empty".into()));
+        };
+        let mut pix = layer.pix.clone();
         // Body parts and arm parts, far to near.
         let mut items: Vec<(f64, Part2, [u8; 3], bool)> = Vec::new();
         if let Some(b) = &self.body {
@@ -210,7 +244,7 @@ impl SceneSynth {
         for (_, part, color, linear) in &items {
             draw_part(&mut pix, part, *color, *linear, &mut poly);
         }
-        Ok(to_rgb(&pix, self.noise_sigma, &mut rng))
+        Ok(to_rgb(&pix, layer.noise.as_deref()))
     }
 
     fn draw_table(&self, pix: &mut Pixmap, camera: &Camera, t: &Table) {
@@ -524,17 +558,39 @@ fn clutter(pix: &mut Pixmap, rng: &mut Pcg64Mcg, n: usize) {
     }
 }
 
-/// Pixmap → RGB8 with additive Gaussian sensor noise.
-fn to_rgb(pix: &Pixmap, sigma: f64, rng: &mut Pcg64Mcg) -> ImageRgb8 {
+/// The additive Gaussian sensor noise of one frame, `len` values (R, G, B per pixel, row-major);
+/// `None` without noise (σ ≤ 0 or not finite).
+fn noise_field(len: usize, sigma: f64, rng: &mut Pcg64Mcg) -> Option<Vec<f64>> {
+    let d = Normal::new(0.0, sigma).ok().filter(|_| sigma > 0.0)?;
+    Some((0..len).map(|_| d.sample(rng)).collect())
+}
+
+/// The pose-independent part of a frame ([`SceneSynth::render_cached`]).
+#[derive(Debug, Clone)]
+struct Layer {
+    synth: SceneSynth,
+    camera: Camera,
+    seed: u64,
+    /// Background, clutter and table.
+    pix: Pixmap,
+    /// The sensor noise, per channel value.
+    noise: Option<Vec<f64>>,
+}
+
+/// What [`SceneSynth::render_cached`] keeps between frames (one per view).
+#[derive(Debug, Clone, Default)]
+pub struct SynthCache {
+    layer: Option<Layer>,
+}
+
+/// Pixmap → RGB8 with additive sensor noise (one value per channel value).
+fn to_rgb(pix: &Pixmap, noise: Option<&[f64]>) -> ImageRgb8 {
     let mut img = ImageRgb8::new(pix.width(), pix.height());
-    let noise = Normal::new(0.0, sigma.max(0.0))
-        .ok()
-        .filter(|_| sigma > 0.0);
-    for (o, p) in img.data.chunks_exact_mut(3).zip(pix.pixels()) {
+    for (i, (o, p)) in img.data.chunks_exact_mut(3).zip(pix.pixels()).enumerate() {
         let c = p.demultiply();
         let rgb = [c.red(), c.green(), c.blue()];
-        for (dst, v) in o.iter_mut().zip(rgb) {
-            let n = noise.map_or(0.0, |d| d.sample(rng));
+        for (k, (dst, v)) in o.iter_mut().zip(rgb).enumerate() {
+            let n = noise.map_or(0.0, |n| n[3 * i + k]);
             *dst = (f64::from(v) + n).round().clamp(0.0, 255.0) as u8;
         }
     }

@@ -122,6 +122,37 @@ fn synth_is_deterministic_and_plausible() {
 }
 
 #[test]
+fn cached_synthesis_gives_the_bytes_of_render() {
+    let s = scene();
+    let mut more = scene();
+    more.clutter = 5;
+    let (small, big) = (camera(320, 240), camera(160, 120));
+    let mut cache = crate::synth::SynthCache::default();
+    // The same layer over several poses, then each part of the key changed in turn.
+    let runs = [
+        (&s, &small, 7),
+        (&s, &small, 7),
+        (&s, &small, 8),
+        (&s, &big, 8),
+        (&more, &big, 8),
+        (&s, &small, 7),
+    ];
+    for (synth, cam, seed) in runs {
+        for pose in poses() {
+            let want = synth.render(cam, &pose, seed).unwrap();
+            let got = synth.render_cached(&mut cache, cam, &pose, seed).unwrap();
+            assert!(want == got, "seed {seed}, {}x{}", cam.width, cam.height);
+        }
+    }
+    let mut quiet = scene();
+    quiet.noise_sigma = 0.0;
+    let a = quiet
+        .render_cached(&mut cache, &small, &poses()[0], 3)
+        .unwrap();
+    assert!(a == quiet.render(&small, &poses()[0], 3).unwrap());
+}
+
+#[test]
 fn likelihood_peaks_at_true_pose() {
     let cam = camera(640, 480);
     let s = scene();
