@@ -1400,7 +1400,7 @@ mod avx2 {
                     let f = s.mul_add_e_f32s(
                         sd,
                         sp(*sin_a),
-                        s.mul_f32s(s.abs_f32s(dot(s, rx, ry, n)), sp(*cos_a)),
+                        s.mul_f32s(abs(s, dot(s, rx, ry, n)), sp(*cos_a)),
                     );
                     let (side_deep, side_out) = below_above(s, f, lim);
                     let (cap0_deep, cap0_out) = below_above(s, norm2(s, rx, ry), r0sq);
@@ -1431,6 +1431,21 @@ mod avx2 {
                 }
             }
         }
+    }
+
+    /// `|x|` per lane (the sign bits cleared). pulp's `abs_f32s` is only `#[inline]`, and LLVM
+    /// may keep it (and the intrinsics in it) out of line, i.e. without AVX2.
+    #[allow(clippy::inline_always)]
+    #[inline(always)]
+    fn abs(s: V3, x: f32x8) -> f32x8 {
+        s.and_f32s(x, pulp::cast([0x7fff_ffff_u32; L8]))
+    }
+
+    /// `|x|` per lane, f64.
+    #[allow(clippy::inline_always)]
+    #[inline(always)]
+    fn abs64(s: V3, x: f64x4) -> f64x4 {
+        s.and_f64s(x, pulp::cast([0x7fff_ffff_ffff_ffff_u64; LANES]))
     }
 
     /// `a·b` of two-vector lanes and a constant.
@@ -2198,6 +2213,9 @@ mod avx2 {
             NOCC >= 2 && meets(&pl.boxes64[1]),
         ];
         let (win, base) = (pl.win, pl.base);
+        // The shift that puts an index modulo W in the top bits of its lane.
+        let shift: core::arch::x86_64::__m128i =
+            pulp::cast([u64::from(32 - W.trailing_zeros()), 0u64]);
         for_each_chunk32(
             s,
             run,
@@ -2208,8 +2226,8 @@ mod avx2 {
                 let mut dropped = is_tail;
                 let (ru, rv) = (s.round_f32x8(u), s.round_f32x8(v));
                 // |x − round(x)| near ½: the f64 rounding may go either way.
-                let du = s.abs_f32s(s.sub_f32s(u, ru));
-                let dv = s.abs_f32s(s.sub_f32s(v, rv));
+                let du = abs(s, s.sub_f32s(u, ru));
+                let dv = abs(s, s.sub_f32s(v, rv));
                 let mut amb = s.and_m32s(ok, s.greater_than_f32s(s.max_f32s(du, dv), half));
                 if !INSIDE {
                     let b = pl.bounds;
@@ -2269,13 +2287,19 @@ mod avx2 {
                     .avx2
                     ._mm256_add_epi32(s.avx._mm256_cvttps_epi32(pulp::cast(rel)), pulp::cast(base));
                 // Lanes that passed are in the window; the others read some G in it, which
-                // is dropped. The indices as four 64-bit pairs: two scalar reads per move out
-                // of the vector register (integer shift and mask, no lane extracts).
+                // is dropped. Each index modulo the window length W = 2^(32 − k) sits in the
+                // top bits of its 32-bit lane (one vector shift left by k), and the indices
+                // leave the register as four 64-bit pairs: the low lane's index is the low
+                // 32 bits shifted right by k, the high lane's the pair shifted right by 32 + k,
+                // both below W without a mask (no lane extracts, no bounds checks).
+                let idx = s.avx2._mm256_sll_epi32(pulp::cast(idx), shift);
                 let idx: [u64; L8 / 2] = pulp::cast(idx);
-                let at = |x: u64| win[x as usize & (W - 1)];
+                let k = 32 - W.trailing_zeros();
+                let at_lo = |x: u64| win[((x as u32) >> k) as usize];
+                let at_hi = |x: u64| win[(x >> (32 + k)) as usize];
                 // The two halves built apart (no 256-bit insert and extract).
-                let lo = f32x4(at(idx[0]), at(idx[0] >> 32), at(idx[1]), at(idx[1] >> 32));
-                let hi = f32x4(at(idx[2]), at(idx[2] >> 32), at(idx[3]), at(idx[3] >> 32));
+                let lo = f32x4(at_lo(idx[0]), at_hi(idx[0]), at_lo(idx[1]), at_hi(idx[1]));
+                let hi = f32x4(at_lo(idx[2]), at_hi(idx[2]), at_lo(idx[3]), at_hi(idx[3]));
                 // Lanes without a sample read G = 1, i.e. add (1 − 1)² = +0, as the f64 loop.
                 let (lo, hi) = if dropped {
                     let [mlo, mhi]: [pulp::m32x4; 2] = pulp::cast(ok);
@@ -2392,7 +2416,7 @@ mod avx2 {
                 let side = s.less_than_f64s(
                     s.add_f64s(
                         s.mul_f64s(sd, sp(sin_a)),
-                        s.mul_f64s(s.abs_f64s(dot(rx, ry, n.x, n.y)), sp(cos_a)),
+                        s.mul_f64s(abs64(s, dot(rx, ry, n.x, n.y)), sp(cos_a)),
                     ),
                     sp(lim),
                 );
