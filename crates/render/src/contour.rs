@@ -716,6 +716,8 @@ fn finite_coords(v: &Vector2<f64>) -> bool {
 type Projection = (Vector3<f64>, Option<Vector2<f64>>);
 
 /// `p` in the camera frame and projected.
+#[allow(clippy::inline_always)] // Outlined, the calls and by-value copies cost ~100 Ir per pose.
+#[inline(always)]
 fn projection(cam: &Camera, p: &Vector3<f64>) -> Projection {
     let c = cam.to_camera(p);
     (c, cam.project_camera(&c))
@@ -723,6 +725,8 @@ fn projection(cam: &Camera, p: &Vector3<f64>) -> Projection {
 
 /// A truncated cone from a to b (camera frame, with their projections) clipped to the near
 /// plane, as a 2-D capsule.
+#[allow(clippy::inline_always)] // Outlined, the calls and by-value copies cost ~100 Ir per pose.
+#[inline(always)]
 fn project_cone(cam: &Camera, a: Projection, b: Projection, ra: f64, rb: f64) -> Option<Part2> {
     let zmin = NEAR_PLANE * 1.000_001;
     let ((mut a, mut pa), (mut b, mut pb), mut ra, mut rb) = (a, b, ra, rb);
@@ -811,6 +815,8 @@ fn project_ellipsoid_prepared(
 
 /// Centre, semi-axes and shape matrix `S = Σ_k (J a_k)(J a_k)ᵀ` (s00, s01, s11) of the
 /// projected hand.
+#[allow(clippy::inline_always)] // Outlined, the calls and by-value copies cost ~100 Ir per pose.
+#[inline(always)]
 fn ellipse_shape(
     cam: &Camera,
     centre: Vector3<f64>,
@@ -847,6 +853,8 @@ fn ellipse_shape(
 
 /// The upper arm and the forearm as 2-D capsules (the elbow, their shared end, is projected
 /// once).
+#[allow(clippy::inline_always)] // Outlined, the calls and by-value copies cost ~100 Ir per pose.
+#[inline(always)]
 fn project_cones(cam: &Camera, parts: &crate::arm::ArmParts) -> [Option<Part2>; 2] {
     let (p, q, r0, r1) = parts.upper;
     let (_, w, f0, f1) = parts.forearm;
