@@ -144,6 +144,9 @@ pub struct TrackOptions {
     /// Per-particle speed range (`TrackerConfigBuilder::speed_range`); `None`: the models'
     /// timing.
     pub speed_range: Option<[f64; 2]>,
+    /// Cap of every model state's self-transition probability
+    /// (`Phmm::with_max_self_transition`; not in the paper); `None`: the models' dwell times.
+    pub max_stay: Option<f64>,
 }
 
 impl Default for TrackOptions {
@@ -154,6 +157,7 @@ impl Default for TrackOptions {
             contour: ContourMethod::Raster,
             theta_prior: ThetaPrior::Training,
             speed_range: None,
+            max_stay: None,
         }
     }
 }
@@ -311,8 +315,17 @@ impl Pipeline {
             .build()
             .map_err(|e| Error::Config(format!("tracker: {e}")))?;
         let names: Vec<String> = model.actions.iter().map(|a| a.name.clone()).collect();
-        let tracker = Tracker::new(model.actions.iter().map(|a| &a.phmm), names.clone(), config)
-            .map_err(|e| Error::Model {
+        let phmms = model
+            .actions
+            .iter()
+            .map(|a| match opts.max_stay {
+                Some(p) => a.phmm.with_max_self_transition(p),
+                None => Ok(a.phmm.clone()),
+            })
+            .collect::<std::result::Result<Vec<_>, _>>()
+            .map_err(|e| Error::Config(format!("max stay: {e}")))?;
+        let tracker =
+            Tracker::new(phmms.iter(), names.clone(), config).map_err(|e| Error::Model {
                 context: "building the tracker".into(),
                 message: e.to_string(),
             })?;
@@ -765,6 +778,46 @@ mod tests {
             assert_eq!(g.estimate.smoothed_pose, w.estimate.smoothed_pose);
             assert_eq!(g.estimate.action_posterior, w.estimate.action_posterior);
             assert_eq!(g.estimate.theta_mean, w.estimate.theta_mean);
+        }
+    }
+
+    /// `max_stay = 1` is the models' own dwell times (the same track bit for bit), a cap below
+    /// the models' self-transitions changes the track, and a cap outside (0, 1] is an error.
+    #[test]
+    #[allow(clippy::float_cmp)] // bit-identical estimates are the claim
+    fn max_stay_caps_the_dwell_times() {
+        let prep = small(6, 5);
+        let frames: Vec<RgbImage> = prep
+            .frames
+            .iter()
+            .map(|v| RgbImage::from_raw(v[0].width, v[0].height, v[0].data.clone()).unwrap())
+            .collect();
+        let run = |max_stay: Option<f64>| {
+            let track = TrackOptions {
+                particles: 60,
+                seed: 5,
+                max_stay,
+                ..TrackOptions::default()
+            };
+            let mut p = Pipeline::new(&prep.model, &prep.scene, &track).unwrap();
+            frames
+                .iter()
+                .enumerate()
+                .map(|(t, f)| p.step(t, &[f]).unwrap().estimate.best_pose)
+                .collect::<Vec<_>>()
+        };
+        let base = run(None);
+        assert_eq!(run(Some(1.0)), base);
+        assert_ne!(run(Some(0.3)), base);
+        for bad in [0.0, 1.5, f64::NAN] {
+            let track = TrackOptions {
+                max_stay: Some(bad),
+                ..TrackOptions::default()
+            };
+            let e = Pipeline::new(&prep.model, &prep.scene, &track)
+                .err()
+                .unwrap();
+            assert!(e.to_string().contains("max_stay"), "{e}");
         }
     }
 

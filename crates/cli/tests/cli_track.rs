@@ -285,6 +285,18 @@ fn bad_input_names_the_frame_with_exit_code_2() {
             &["--speed-range"],
         );
     }
+    // So is a bad dwell cap.
+    for bad in ["0", "1.5", "x", "nan"] {
+        expect_input_error(
+            &track(
+                &f.root,
+                "video/frames",
+                &["--csv", "x.csv", "--max-stay", bad],
+                None,
+            ),
+            &["--max-stay"],
+        );
+    }
     // Empty directory.
     std::fs::create_dir_all(f.root.join("empty")).unwrap();
     expect_input_error(

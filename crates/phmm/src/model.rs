@@ -584,6 +584,54 @@ impl Phmm {
         Ok(model.with_training_thetas(self.training_thetas.clone()))
     }
 
+    /// The model with every self-transition capped at `max_stay`: a state i with
+    /// `a_ii > max_stay` keeps `a_ii = max_stay` and its other transitions and exit scaled by
+    /// `(1 − max_stay) / (1 − a_ii)`, so the order of the states, the relative odds of the jumps
+    /// and everything else are unchanged and the expected dwell in any state is at most
+    /// `1 / (1 − max_stay)` frames. A state that cannot be left (`a_ii = 1`) is unchanged.
+    /// This is a tracking-time regulariser for models trained on demonstrators who pause for
+    /// very different times (a drink held at the mouth for 10 or 100 frames): EM gives such a
+    /// state the pooled, long geometric dwell, which a faster subject's track cannot leave in
+    /// time. Errors: `max_stay` not in (0, 1].
+    pub fn with_max_self_transition(&self, max_stay: f64) -> Result<Phmm, PhmmError> {
+        if !(max_stay > 0.0 && max_stay <= 1.0) {
+            return Err(PhmmError::InvalidParameter {
+                name: "max_stay",
+                reason: format!("must be in (0, 1], got {max_stay}"),
+            });
+        }
+        let w = self.j + 1;
+        let mut trans = self.trans.clone();
+        let mut exit = self.exit.clone();
+        for i in 0..self.n {
+            let stay = trans[i * w];
+            let leave: f64 = trans[i * w + 1..(i + 1) * w].iter().sum::<f64>() + exit[i];
+            if stay > max_stay && leave > 0.0 {
+                let scale = (1.0 - max_stay) / leave;
+                trans[i * w] = max_stay;
+                for k in 1..w {
+                    trans[i * w + k] *= scale;
+                }
+                exit[i] *= scale;
+            }
+        }
+        let model = Phmm::assemble(
+            false,
+            self.j,
+            self.end_mode,
+            self.covariance_kind,
+            self.start.clone(),
+            trans,
+            exit,
+            self.mean_bias.clone(),
+            self.weights.clone(),
+            self.theta_center.clone(),
+            self.theta_scale.clone(),
+            self.covariances.clone(),
+        )?;
+        Ok(model.with_training_thetas(self.training_thetas.clone()))
+    }
+
     /// Number of states N.
     pub fn n_states(&self) -> usize {
         self.n

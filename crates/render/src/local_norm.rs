@@ -156,8 +156,8 @@ mod tests {
         let mut s = 12345u64;
         let mut rnd = || {
             s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
             (s >> 40) as f32 / (1u64 << 24) as f32
         };
         let mut scratch = LocalNormScratch::default();

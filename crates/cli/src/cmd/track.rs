@@ -78,6 +78,23 @@ pub struct Args {
     /// timing.
     #[arg(long, value_name = "LO,HI", value_parser = parse_speed_range)]
     pub speed_range: Option<[f64; 2]>,
+    /// Cap every model state's self-transition probability at P (0 < P ≤ 1, e.g. 0.8: no state
+    /// is expected to last more than 1/(1 − P) frames), for people who pause for less time than
+    /// the demonstrations did (a drink held at the mouth). Default: the models' dwell times.
+    #[arg(long, value_name = "P", value_parser = parse_max_stay)]
+    pub max_stay: Option<f64>,
+}
+
+/// `--max-stay P`: 0 < P ≤ 1.
+fn parse_max_stay(s: &str) -> Result<f64, String> {
+    let p: f64 = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{s}` is not a number (expected 0 < P ≤ 1, e.g. 0.8)"))?;
+    if !(p > 0.0 && p <= 1.0) {
+        return Err(format!("needs 0 < P ≤ 1, got {p}"));
+    }
+    Ok(p)
 }
 
 /// `--speed-range LO,HI`: two numbers, 0 < LO ≤ HI ≤ 4.
@@ -153,6 +170,7 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
             ThetaPriorArg::Scene => ThetaPrior::Scene,
         },
         speed_range: args.speed_range,
+        max_stay: args.max_stay,
     };
     let outputs = TrackOutputs {
         mcap: args.output.clone(),
