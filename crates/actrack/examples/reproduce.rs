@@ -201,7 +201,14 @@ fn args() -> Args {
             "--diag" => a.diag = true,
             "--trace" => a.trace = it.next(),
             "--dump" => a.dump = it.next().map(PathBuf::from),
-            other => eprintln!("reproduce: ignoring argument `{other}`"),
+            other => {
+                // Never fall through to a full run (which rewrites docs/results.md) on a typo.
+                eprintln!(
+                    "reproduce: unknown argument `{other}`; the options are listed at the top of \
+                     crates/actrack/examples/reproduce.rs"
+                );
+                std::process::exit(2);
+            }
         }
     }
     a
