@@ -129,6 +129,19 @@ impl ActionModel {
         self.actions.iter().map(|a| a.name.as_str()).collect()
     }
 
+    /// The actions' PHMMs for tracking, in order: as trained, or with every self-transition
+    /// capped at `max_stay` ([`Phmm::with_max_self_transition`]). Errors: a cap outside (0, 1].
+    pub fn tracking_phmms(&self, max_stay: Option<f64>) -> Result<Vec<Phmm>> {
+        self.actions
+            .iter()
+            .map(|a| match max_stay {
+                Some(p) => a.phmm.with_max_self_transition(p),
+                None => Ok(a.phmm.clone()),
+            })
+            .collect::<std::result::Result<Vec<_>, _>>()
+            .map_err(|e| Error::Config(format!("max_stay: {e}")))
+    }
+
     /// The action by name.
     pub fn action(&self, name: &str) -> Option<&Action> {
         self.actions.iter().find(|a| a.name == name)

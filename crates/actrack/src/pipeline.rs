@@ -315,15 +315,7 @@ impl Pipeline {
             .build()
             .map_err(|e| Error::Config(format!("tracker: {e}")))?;
         let names: Vec<String> = model.actions.iter().map(|a| a.name.clone()).collect();
-        let phmms = model
-            .actions
-            .iter()
-            .map(|a| match opts.max_stay {
-                Some(p) => a.phmm.with_max_self_transition(p),
-                None => Ok(a.phmm.clone()),
-            })
-            .collect::<std::result::Result<Vec<_>, _>>()
-            .map_err(|e| Error::Config(format!("max stay: {e}")))?;
+        let phmms = model.tracking_phmms(opts.max_stay)?;
         let tracker =
             Tracker::new(phmms.iter(), names.clone(), config).map_err(|e| Error::Model {
                 context: "building the tracker".into(),
@@ -726,6 +718,14 @@ mod tests {
         prepare(&opts, frames).unwrap()
     }
 
+    /// The prepared frames of the first camera as images.
+    fn first_view_frames(prep: &Prepared) -> Vec<RgbImage> {
+        prep.frames
+            .iter()
+            .map(|v| RgbImage::from_raw(v[0].width, v[0].height, v[0].data.clone()).unwrap())
+            .collect()
+    }
+
     /// The overlapped loop (next frame's edge image alongside the filter step, on two threads)
     /// tracks exactly as the serial one; a step with nothing primed is an error, not a stale
     /// frame tracked twice.
@@ -733,11 +733,7 @@ mod tests {
     #[allow(clippy::float_cmp)] // bit-identical estimates are the claim
     fn overlapped_steps_equal_serial_steps() {
         let prep = small(6, 6);
-        let frames: Vec<RgbImage> = prep
-            .frames
-            .iter()
-            .map(|v| RgbImage::from_raw(v[0].width, v[0].height, v[0].data.clone()).unwrap())
-            .collect();
+        let frames = first_view_frames(&prep);
         let track = TrackOptions {
             particles: 60,
             seed: 5,
@@ -787,11 +783,7 @@ mod tests {
     #[allow(clippy::float_cmp)] // bit-identical estimates are the claim
     fn max_stay_caps_the_dwell_times() {
         let prep = small(6, 5);
-        let frames: Vec<RgbImage> = prep
-            .frames
-            .iter()
-            .map(|v| RgbImage::from_raw(v[0].width, v[0].height, v[0].data.clone()).unwrap())
-            .collect();
+        let frames = first_view_frames(&prep);
         let run = |max_stay: Option<f64>| {
             let track = TrackOptions {
                 particles: 60,

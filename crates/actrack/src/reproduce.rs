@@ -532,15 +532,7 @@ pub fn run_video(
         synth.body = None;
     }
     let names: Vec<String> = model.actions.iter().map(|a| a.name.clone()).collect();
-    let phmms = model
-        .actions
-        .iter()
-        .map(|a| match cond.max_stay {
-            Some(p) => a.phmm.with_max_self_transition(p),
-            None => Ok(a.phmm.clone()),
-        })
-        .collect::<std::result::Result<Vec<_>, _>>()
-        .map_err(|e| Error::Config(format!("max_stay: {e}")))?;
+    let phmms = model.tracking_phmms(cond.max_stay)?;
     let mut tracker = Tracker::new(phmms.iter(), names.clone(), tracker_config(model, cond)?)
         .map_err(|e| Error::Model {
             context: "building the tracker".into(),
