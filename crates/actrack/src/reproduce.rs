@@ -16,7 +16,7 @@
 use std::collections::BTreeMap;
 use std::time::Instant;
 
-use actrack_pf::{TableRegion as PfRegion, Tracker, TrackerConfig};
+use actrack_pf::{PoseSampling, TableRegion as PfRegion, Tracker, TrackerConfig};
 use actrack_render::{
     ContourMethod, EdgeImage, EdgeWorkspace, ImageView, LikelihoodModel, contour_points,
 };
@@ -267,6 +267,13 @@ pub struct Condition {
     /// With `short_contour_penalty`: contours longer than n̄ are scored by the same sum form
     /// (they gain for each point below λ) instead of SPEC's mean.
     pub penalty_long: bool,
+    /// How particles turn their state into a pose (SPEC §3.4, E14; default one Gaussian draw).
+    pub pose_sampling: PoseSampling,
+    /// Frames of the causal median filter of the reported pose (SPEC §3.7; default 5).
+    pub median_window: usize,
+    /// Phase-jump rate ρ ([`actrack_pf::TrackerConfigBuilder::phase_jump`]; not in the paper);
+    /// `None`: the models' transitions only.
+    pub phase_jump: Option<f64>,
 }
 
 impl Condition {
@@ -292,6 +299,9 @@ impl Condition {
             local_norm: None,
             max_stay: None,
             penalty_long: false,
+            pose_sampling: PoseSampling::Gaussian { samples: 1 },
+            median_window: 5,
+            phase_jump: None,
         }
     }
 
@@ -359,6 +369,9 @@ pub struct VideoRun {
     pub truth: Trajectory,
     /// The track with the best particle's pose instead of the median-filtered one (diagnostic).
     pub best: Trajectory,
+    /// The track with the posterior-mean pose of the MAP action's particles
+    /// ([`actrack_pf::Estimate::mean_pose`]) instead of the median-filtered best one.
+    pub mean: Trajectory,
     /// Milliseconds per frame of edge image + filter step (rendering excluded).
     pub step_ms: Vec<f64>,
     /// Milliseconds per frame of the scene synthesis (all views).
@@ -376,7 +389,10 @@ pub fn tracker_config(model: &ActionModel, cond: &Condition) -> Result<TrackerCo
         .particles(cond.particles)
         .seed(cond.seed)
         .sigma_end_ratio(cond.sigma_end_ratio)
-        .speed_range(cond.speed_range);
+        .speed_range(cond.speed_range)
+        .pose_sampling(cond.pose_sampling)
+        .median_window(cond.median_window)
+        .phase_jump(cond.phase_jump);
     if cond.per_action_theta {
         b = b.action_regions(training_theta_regions(model, REGION_PAD, (centre, half)));
     }
@@ -547,6 +563,7 @@ pub fn run_video(
     };
     let mut truth = Trajectory::default();
     let mut best = track.clone();
+    let mut mean = track.clone();
     let (mut step_ms, mut render_ms, mut overlays) = (Vec::new(), Vec::new(), Vec::new());
     let (mut inside, mut total) = (0usize, 0usize);
     let mut frame = 0usize;
@@ -618,6 +635,9 @@ pub fn run_video(
             let mut b = row.clone();
             b.pose = r.best_world;
             best.rows.push(b);
+            let mut m = row.clone();
+            m.pose = scene.pose_to_world(&r.estimate.mean_pose);
+            mean.rows.push(m);
             track.rows.push(row);
             if overlay_frames.contains(&frame)
                 && let Some(mut img) = images.into_iter().next()
@@ -636,6 +656,7 @@ pub fn run_video(
         track,
         truth,
         best,
+        mean,
         step_ms,
         render_ms,
         overlays,
@@ -654,6 +675,8 @@ pub struct ConditionResult {
     pub report: EvalReport,
     /// Joint errors of the unfiltered best particle (diagnostic: the median filter's lag).
     pub best_particle: ErrorStats,
+    /// The metrics with the posterior-mean pose ([`VideoRun::mean`]) as the estimate.
+    pub mean_pose: EvalReport,
     /// Action names (rows/columns of the confusion matrix).
     pub actions: Vec<String>,
     /// `confusion[true][predicted]`, counted over action instances.
@@ -703,15 +726,18 @@ pub fn summarise(
 ) -> Result<ConditionResult> {
     let (track, truth) = merge(runs);
     let report = evaluate(&track, &truth)?;
-    let best_runs: Vec<VideoRun> = runs
-        .iter()
-        .map(|r| VideoRun {
-            track: r.best.clone(),
-            ..r.clone()
-        })
-        .collect();
-    let (best, _) = merge(&best_runs);
+    let with_track = |pick: fn(&VideoRun) -> &Trajectory| -> Vec<VideoRun> {
+        runs.iter()
+            .map(|r| VideoRun {
+                track: pick(r).clone(),
+                ..r.clone()
+            })
+            .collect()
+    };
+    let (best, _) = merge(&with_track(|r| &r.best));
     let best_particle = evaluate(&best, &truth)?.overall;
+    let (mean_track, _) = merge(&with_track(|r| &r.mean));
+    let mean_pose = evaluate(&mean_track, &truth)?;
     let actions: Vec<String> = model.actions.iter().map(|a| a.name.clone()).collect();
     let mut confusion = vec![vec![0usize; actions.len()]; actions.len()];
     for i in &report.instances {
@@ -737,6 +763,7 @@ pub fn summarise(
         videos: runs.len(),
         report,
         best_particle,
+        mean_pose,
         actions,
         confusion,
         ms_per_frame: mean(runs.iter().flat_map(|r| r.step_ms.clone()).collect()),

@@ -153,6 +153,8 @@ pub struct TrackerConfig {
     pub(crate) action_regions: Option<Vec<TableRegion>>,
     #[serde(default)]
     pub(crate) speed_range: Option<[f64; 2]>,
+    #[serde(default)]
+    pub(crate) phase_jump: Option<f64>,
     pub(crate) median_window: usize,
     pub(crate) seed: u64,
 }
@@ -178,6 +180,7 @@ impl TrackerConfig {
                 pose_sampling: PoseSampling::Gaussian { samples: 1 },
                 action_regions: None,
                 speed_range: None,
+                phase_jump: None,
                 median_window: 5,
                 seed: 0,
             },
@@ -249,6 +252,10 @@ impl TrackerConfig {
     /// The range of per-particle speeds, if set.
     pub fn speed_range(&self) -> Option<[f64; 2]> {
         self.speed_range
+    }
+    /// The phase-jump rate ρ, if set.
+    pub fn phase_jump(&self) -> Option<f64> {
+        self.phase_jump
     }
     /// Window of the causal median filter of the best pose, frames.
     pub fn median_window(&self) -> usize {
@@ -368,6 +375,19 @@ impl TrackerConfigBuilder {
         self.config.speed_range = range;
         self
     }
+    /// Phase jumps (not in the SPEC; default none). With `Some(ρ)`, each frame each particle,
+    /// with probability ρ, draws its state k uniformly over its action's states instead of
+    /// taking the transition row (action and θ are kept; θ then diffuses with σ at the new k).
+    /// The motion model then allows, rarely, a jump to any phase of the action: a filter whose
+    /// particles all run ahead of or behind the person (a hand held at the mouth longer than
+    /// any training demonstration, a pause the model did not see) can recover in a frame
+    /// instead of waiting for the slow geometric dwell times, because the jumped particles that
+    /// match the image win the next resampling. ρ ∈ (0, 1).
+    #[must_use]
+    pub fn phase_jump(mut self, rate: Option<f64>) -> Self {
+        self.config.phase_jump = rate;
+        self
+    }
     /// Window of the causal median filter, frames (≥ 1; default 5; 1 disables smoothing).
     #[must_use]
     pub fn median_window(mut self, window: usize) -> Self {
@@ -447,6 +467,13 @@ impl TrackerConfigBuilder {
         {
             return bad(format!(
                 "the speed range needs 0 < lo ≤ hi ≤ 4 (1 = the model's timing), got [{lo}, {hi}]"
+            ));
+        }
+        if let Some(r) = c.phase_jump
+            && !(r.is_finite() && r > 0.0 && r < 1.0)
+        {
+            return bad(format!(
+                "the phase-jump rate is a probability per particle and frame in (0, 1), got {r}"
             ));
         }
         if c.median_window == 0 {

@@ -62,6 +62,12 @@ pub struct Estimate {
     /// The best pose median-filtered per coordinate over a causal window (default 5 frames;
     /// Fig. 4).
     pub smoothed_pose: [f64; 9],
+    /// The weighted mean of the corrected poses x̃ of the MAP action's particles (metres, actor
+    /// frame; all particles when that action has no weight): the posterior-mean pose given the
+    /// action, the minimum-mean-square alternative to the best particle (not in the paper).
+    /// Being a mean of corrected poses, its segment lengths can be slightly shorter than the
+    /// arm's.
+    pub mean_pose: [f64; 9],
 }
 
 /// Causal per-coordinate median filter of poses over the last `window` frames.
@@ -206,7 +212,8 @@ pub(crate) fn compute(
     let (mu_u, mu_v) = (r0[0] + du_mean, r0[1] + dv_mean);
     let (mut cuu, mut cuv, mut cvv) = (0.0, 0.0, 0.0);
     let (mut mu_a, mut mv_a, mut wa) = (0.0, 0.0, 0.0);
-    for (s, &w) in set.states.iter().zip(set.weights) {
+    let mut pose_a = [0.0; 9];
+    for (i, (s, &w)) in set.states.iter().zip(set.weights).enumerate() {
         let du = (s.theta[0] - r0[0]) - du_mean;
         let dv = (s.theta[1] - r0[1]) - dv_mean;
         cuu += w * du * du;
@@ -216,6 +223,9 @@ pub(crate) fn compute(
             wa += w;
             mu_a += w * s.theta[0];
             mv_a += w * s.theta[1];
+            for (m, x) in pose_a.iter_mut().zip(&set.poses[i * set.pose_stride]) {
+                *m += w * x;
+            }
         }
     }
     let [hx, hy] = set.region.half_extents;
@@ -259,6 +269,19 @@ pub(crate) fn compute(
     }
     let best_pose = set.poses[best * set.pose_stride];
     let smoothed_pose = median.push(best_pose);
+    let mean_pose = if wa > 0.0 {
+        pose_a.map(|m| m / wa)
+    } else {
+        // No weight on the MAP action (all weights zero): the unweighted mean of every particle.
+        let n = set.states.len().max(1) as f64;
+        let mut m = [0.0; 9];
+        for i in 0..set.states.len() {
+            for (mc, x) in m.iter_mut().zip(&set.poses[i * set.pose_stride]) {
+                *mc += x / n;
+            }
+        }
+        m
+    };
 
     Estimate {
         frame,
@@ -294,6 +317,7 @@ pub(crate) fn compute(
         best_action: set.states[best].action,
         best_pose,
         smoothed_pose,
+        mean_pose,
     }
 }
 
@@ -389,6 +413,34 @@ mod tests {
         // The MAP action is 0 on a tie; its θ mean is the mean of the left half.
         assert_eq!(e.map_action, 0);
         assert!(e.theta_mean_map_action[0] < 0.1);
+    }
+
+    /// The mean pose is Σ_{i∈a*} w_i x̃_i / Σ_{i∈a*} w_i over the MAP action a* (brute force),
+    /// and ignores the other actions' particles.
+    #[test]
+    fn mean_pose_is_the_map_actions_weighted_mean() {
+        let m = 11;
+        let states: Vec<ActionState> = (0..m)
+            .map(|i| ActionState {
+                action: usize::from(i % 3 == 0),
+                theta: [0.0, 0.0],
+                k: 0,
+            })
+            .collect();
+        let raw: Vec<f64> = (0..m).map(|i| 1.0 + (i * i % 7) as f64).collect();
+        let s: f64 = raw.iter().sum();
+        let w: Vec<f64> = raw.iter().map(|v| v / s).collect();
+        let e = run(&states, &w, &[3, 3]);
+        let a = e.map_action;
+        let (mut num, mut den) = (0.0, 0.0);
+        for i in (0..m).filter(|&i| states[i].action == a) {
+            num += w[i] * i as f64;
+            den += w[i];
+        }
+        assert!(den > 0.0 && den < 1.0);
+        for c in e.mean_pose {
+            assert!((c - num / den).abs() < 1e-12, "{c} vs {}", num / den);
+        }
     }
 
     #[test]

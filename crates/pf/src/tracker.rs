@@ -93,7 +93,13 @@ impl Kernel<'_> {
 
     /// SPEC §3.3: timing, grammar on exit, θ diffusion with the cooling schedule at k'.
     fn propagate<R: Rng + ?Sized>(&self, s: &mut ActionState, speed: &mut f64, rng: &mut R) {
-        if self.config.speed_range.is_none() {
+        // A phase jump replaces the frame's transitions (no draw at all without the option, so
+        // the default streams are unchanged).
+        if let Some(rate) = self.config.phase_jump
+            && rng.random::<f64>() < rate
+        {
+            s.k = rng.random_range(0..self.models[s.action].n);
+        } else if self.config.speed_range.is_none() {
             self.transition(s, rng);
         } else {
             let whole = speed.floor();
@@ -725,6 +731,72 @@ mod tests {
                 .unwrap()
             })
             .collect()
+    }
+
+    /// Phase jumps: with probability ρ the state is redrawn uniformly over the action's states
+    /// (counted from the last state, which the no-exit model never leaves by itself), the
+    /// action is kept, and rates outside (0, 1) are refused.
+    #[test]
+    fn phase_jumps_redraw_the_state_uniformly() {
+        let n = 8;
+        let models = caches(0.0, n);
+        let grammar = GrammarCache::Uniform;
+        let rho = 0.3;
+        let cfg = TrackerConfig::builder(synthetic::table_region())
+            .phase_jump(Some(rho))
+            .build()
+            .unwrap();
+        let kernel = test_kernel(&models, &grammar, &cfg);
+        let mut rng = Pcg64Mcg::seed_from_u64(11);
+        let trials = 40_000;
+        let mut counts = vec![0usize; n];
+        for _ in 0..trials {
+            let mut s = ActionState {
+                action: 1,
+                theta: [0.0, 0.0],
+                k: n - 1,
+            };
+            kernel.propagate(&mut s, &mut 1.0, &mut rng);
+            assert_eq!(s.action, 1);
+            counts[s.k] += 1;
+        }
+        let t = f64::from(trials);
+        for (k, &c) in counts.iter().enumerate() {
+            let p = if k == n - 1 {
+                1.0 - rho + rho / n as f64
+            } else {
+                rho / n as f64
+            };
+            let sd = (t * p * (1.0 - p)).sqrt();
+            assert!(
+                (c as f64 - t * p).abs() < 5.0 * sd,
+                "state {k}: {c} draws, expected {:.0} ± {sd:.0}",
+                t * p
+            );
+        }
+        // Without the option the last state is never left.
+        let plain = TrackerConfig::builder(synthetic::table_region())
+            .build()
+            .unwrap();
+        let kernel = test_kernel(&models, &grammar, &plain);
+        for _ in 0..1000 {
+            let mut s = ActionState {
+                action: 0,
+                theta: [0.0, 0.0],
+                k: n - 1,
+            };
+            kernel.propagate(&mut s, &mut 1.0, &mut rng);
+            assert_eq!(s.k, n - 1);
+        }
+        for bad in [0.0, 1.0, -0.1, f64::NAN] {
+            assert!(
+                TrackerConfig::builder(synthetic::table_region())
+                    .phase_jump(Some(bad))
+                    .build()
+                    .is_err(),
+                "{bad}"
+            );
+        }
     }
 
     /// Per-particle speeds: a speed s takes ⌊s⌋ transition draws per frame plus one with
