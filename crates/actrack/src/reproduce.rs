@@ -492,7 +492,7 @@ struct EdgeStage {
     ws: EdgeWorkspace,
     local: actrack_render::LocalNormScratch,
     spec: EdgeImage,
-    mask: Vec<f32>,
+    gate: GateScratch,
 }
 
 impl EdgeStage {
@@ -518,7 +518,7 @@ impl EdgeStage {
             }
         }
         if let (Some(gate), Some(bg)) = (&cond.foreground_gate, background) {
-            gate.apply(view, bg, &mut self.mask, out)
+            gate.apply(view, bg, &mut self.gate, out)
                 .map_err(|e| Error::Config(format!("frame {frame}: {e}")))?;
         }
         Ok(())
@@ -543,20 +543,6 @@ pub struct ForegroundGate {
     pub floor: f32,
 }
 
-/// SPEC §4.1's grey value of an RGB8 or grey view, per pixel.
-fn grey_values(view: ImageView<'_>, out: &mut Vec<f32>) {
-    out.clear();
-    match view {
-        ImageView::Rgb8 { data, .. } => {
-            out.extend(data.chunks_exact(3).map(|c| {
-                0.299 * f32::from(c[0]) + 0.587 * f32::from(c[1]) + 0.114 * f32::from(c[2])
-            }));
-        }
-        ImageView::Grey8 { data, .. } => out.extend(data.iter().map(|&x| f32::from(x))),
-        ImageView::GreyF32 { data, .. } => out.extend_from_slice(data),
-    }
-}
-
 /// The per-pixel median (lower median for an even count) of `frames` (equal sizes).
 fn median_image(frames: &[Vec<f32>]) -> Vec<f32> {
     let n = frames.first().map_or(0, Vec::len);
@@ -569,31 +555,6 @@ fn median_image(frames: &[Vec<f32>]) -> Vec<f32> {
             *buf.select_nth_unstable_by(k, f32::total_cmp).1
         })
         .collect()
-}
-
-/// Dilates a 0/1 mask (`w` × `h`, row-major) by a square of half-width `r`, in place.
-fn dilate(mask: &mut [f32], w: usize, h: usize, r: usize) {
-    let mut line = Vec::new();
-    let mut pass = |mask: &mut [f32], start: usize, step: usize, n: usize| {
-        line.clear();
-        line.extend((0..n).map(|i| mask[start + i * step]));
-        // prefix[i] = ones among the first i values.
-        let mut prefix = Vec::with_capacity(n + 1);
-        prefix.push(0u32);
-        for &x in &line {
-            prefix.push(prefix[prefix.len() - 1] + u32::from(x > 0.5));
-        }
-        for i in 0..n {
-            let (lo, hi) = (i.saturating_sub(r), (i + r + 1).min(n));
-            mask[start + i * step] = if prefix[hi] > prefix[lo] { 1.0 } else { 0.0 };
-        }
-    };
-    for y in 0..h {
-        pass(mask, y * w, 1, w);
-    }
-    for x in 0..w {
-        pass(mask, x, w, h);
-    }
 }
 
 impl ForegroundGate {
@@ -619,10 +580,20 @@ impl ForegroundGate {
         median_image(frames)
     }
 
-    /// The foreground mask of `view` against `background` (0/1, dilated).
-    pub fn mask(&self, view: ImageView<'_>, background: &[f32], mask: &mut Vec<f32>) {
-        grey_values(view, mask);
-        for (m, &b) in mask.iter_mut().zip(background) {
+    /// The foreground mask of `view` against `background` (0/1, dilated by
+    /// [`actrack_render::max_filter`]) into `mask`.
+    pub fn mask(
+        &self,
+        view: ImageView<'_>,
+        background: &[f32],
+        scratch: &mut GateScratch,
+        mask: &mut Vec<f32>,
+    ) -> Result<()> {
+        let GateScratch {
+            grey, chan, max, ..
+        } = scratch;
+        actrack_render::grey_image(view, chan, grey);
+        for (m, &b) in grey.iter_mut().zip(background) {
             *m = if (*m - b).abs() > self.threshold {
                 1.0
             } else {
@@ -630,7 +601,14 @@ impl ForegroundGate {
             };
         }
         let (w, h) = view.size();
-        dilate(mask, w as usize, h as usize, self.radius as usize);
+        actrack_render::max_filter(
+            grey,
+            (w as usize, h as usize),
+            self.radius as usize,
+            max,
+            mask,
+        )
+        .map_err(|e| Error::Config(format!("foreground gate: {e}")))
     }
 
     /// G ← G · (floor + (1 − floor) · mask).
@@ -638,7 +616,7 @@ impl ForegroundGate {
         &self,
         view: ImageView<'_>,
         background: &[f32],
-        mask: &mut Vec<f32>,
+        scratch: &mut GateScratch,
         g: &mut EdgeImage,
     ) -> Result<()> {
         let (w, h) = view.size();
@@ -647,15 +625,26 @@ impl ForegroundGate {
                 "foreground gate: background, frame and G differ in size".into(),
             ));
         }
-        self.mask(view, background, mask);
+        let mut mask = std::mem::take(&mut scratch.mask);
+        self.mask(view, background, scratch, &mut mask)?;
         let mut data = std::mem::take(g).into_data();
-        for (d, &m) in data.iter_mut().zip(mask.iter()) {
+        for (d, &m) in data.iter_mut().zip(&mask) {
             *d *= self.floor + (1.0 - self.floor) * m;
         }
+        scratch.mask = mask;
         *g = EdgeImage::from_vec(w, h, data)
             .map_err(|e| Error::Config(format!("foreground gate: {e}")))?;
         Ok(())
     }
+}
+
+/// Buffers of [`ForegroundGate`] (no allocation after the first frame of a size).
+#[derive(Debug, Default)]
+pub struct GateScratch {
+    grey: Vec<f32>,
+    chan: Vec<f32>,
+    max: actrack_render::LocalNormScratch,
+    mask: Vec<f32>,
 }
 
 /// What rendering and scoring a condition in a scene needs: the scene synthesis with the
@@ -727,6 +716,7 @@ pub fn run_video(
     let mut backgrounds: Vec<Vec<f32>> = Vec::new();
     if let Some(gate) = &cond.foreground_gate {
         gate.validate()?;
+        let mut chan = Vec::new();
         for (v, cam) in cams.iter().enumerate() {
             let mut greys = Vec::new();
             for pose in segments.iter().flat_map(|s| &s.poses) {
@@ -742,7 +732,7 @@ pub fn run_video(
                 let view = ImageView::rgb8(&img.data, img.width, img.height)
                     .map_err(|e| Error::Config(format!("synth: {e}")))?;
                 let mut g = Vec::new();
-                grey_values(view, &mut g);
+                actrack_render::grey_image(view, &mut chan, &mut g);
                 greys.push(g);
             }
             backgrounds.push(ForegroundGate::background(&greys));
@@ -1258,8 +1248,15 @@ mod tests {
             let mask: Vec<f32> = (0..w * h)
                 .map(|_| if next() < 0.1 { 1.0 } else { 0.0 })
                 .collect();
-            let mut d = mask.clone();
-            dilate(&mut d, w, h, r);
+            let mut d = Vec::new();
+            actrack_render::max_filter(
+                &mask,
+                (w, h),
+                r,
+                &mut actrack_render::LocalNormScratch::default(),
+                &mut d,
+            )
+            .unwrap();
             for y in 0..h {
                 for x in 0..w {
                     let any = (0..h).any(|yy| {
@@ -1287,8 +1284,8 @@ mod tests {
             floor: 0.25,
         };
         let mut g = EdgeImage::constant(w as u32, h as u32, 0.8).unwrap();
-        let mut mask = Vec::new();
-        gate.apply(view, &bg, &mut mask, &mut g).unwrap();
+        let mut scratch = GateScratch::default();
+        gate.apply(view, &bg, &mut scratch, &mut g).unwrap();
         for y in 0..h {
             for x in 0..w {
                 let near = x.abs_diff(4) <= 1 && y.abs_diff(3) <= 1;
@@ -1304,7 +1301,7 @@ mod tests {
             ..gate
         };
         assert!(nan.validate().is_err());
-        assert!(gate.apply(view, &bg[1..], &mut mask, &mut g).is_err());
+        assert!(gate.apply(view, &bg[1..], &mut scratch, &mut g).is_err());
     }
 
     #[test]

@@ -783,6 +783,18 @@ impl Threshold {
     }
 }
 
+/// The grey image of SPEC §4.1 step 1 (the edge image's own conversion, [`grey_row`]), row-major
+/// into `out` (resized); `chan` is scratch.
+pub fn grey_image(frame: ImageView<'_>, chan: &mut Vec<f32>, out: &mut Vec<f32>) {
+    let (w, h) = frame.size();
+    let (w, h) = (w as usize, h as usize);
+    out.clear();
+    out.resize(w * h, 0.0);
+    for (y, row) in out.chunks_exact_mut(w).enumerate().take(h) {
+        grey_row(&frame, y, chan, row);
+    }
+}
+
 /// One grey row (0.299 R + 0.587 G + 0.114 B for colour frames). Colour rows are first widened
 /// to f32 channel by channel into `chan` (contiguous, so it vectorises), then combined with a
 /// stride-3 read: about twice as fast as converting pixel by pixel.

@@ -68,13 +68,13 @@ pub mod synth;
 pub use arm::{ArmGeometry, ArmParts, correct_arm};
 pub use camera::{Camera, NEAR_PLANE};
 pub use contour::{ContourMethod, Part2, RenderScratch, contour_points, project_parts};
-pub use edge::{EdgeImage, EdgeParams, EdgeWorkspace};
+pub use edge::{EdgeImage, EdgeParams, EdgeWorkspace, grey_image};
 pub use error::RenderError;
 #[cfg(feature = "gpu")]
 pub use gpu::{GpuError, GpuLikelihood};
 pub use image::{ImageRgb8, ImageView};
 pub use likelihood::{LikelihoodModel, SamplingMode};
-pub use local_norm::{LocalNorm, LocalNormScratch, local_normalise};
+pub use local_norm::{LocalNorm, LocalNormScratch, local_normalise, max_filter};
 
 /// An arm pose as it crosses crate boundaries: (p shoulder xyz, q elbow xyz, r fingertip xyz),
 /// metres, world frame.

@@ -95,6 +95,42 @@ fn window_max(
     }
 }
 
+/// The maximum of `src` (`width` × `height`, row-major) over the square window of half-width
+/// `radius` around each pixel (clamped at the borders), into `out` (resized). For a 0/1 mask
+/// this is its dilation by the square.
+pub fn max_filter(
+    src: &[f32],
+    (width, height): (usize, usize),
+    radius: usize,
+    scratch: &mut LocalNormScratch,
+    out: &mut Vec<f32>,
+) -> Result<(), RenderError> {
+    if width.checked_mul(height) != Some(src.len()) {
+        return Err(RenderError::InvalidImage(format!(
+            "max filter: {width}×{height} image needs {} values, got {}",
+            width.saturating_mul(height),
+            src.len()
+        )));
+    }
+    let (w, h) = (width, height);
+    let LocalNormScratch {
+        rows,
+        prefix,
+        suffix,
+    } = scratch;
+    rows.clear();
+    rows.resize(w * h, 0.0);
+    for y in 0..h {
+        window_max(src, rows, y * w, 1, w, radius, (prefix, suffix));
+    }
+    out.clear();
+    out.resize(w * h, 0.0);
+    for x in 0..w {
+        window_max(rows, out, x, w, h, radius, (prefix, suffix));
+    }
+    Ok(())
+}
+
 /// G divided by its local maximum ([`LocalNorm`]), into `out` (resized; its previous contents
 /// are replaced). Values stay in [0, 1]; a G of zeros stays zero.
 pub fn local_normalise(
@@ -105,24 +141,9 @@ pub fn local_normalise(
 ) -> Result<(), RenderError> {
     settings.validate()?;
     let (w, h) = (g.width() as usize, g.height() as usize);
-    let r = settings.radius as usize;
     let src = g.data();
-    let LocalNormScratch {
-        rows,
-        prefix,
-        suffix,
-    } = scratch;
-    rows.clear();
-    rows.resize(w * h, 0.0);
-    for y in 0..h {
-        window_max(src, rows, y * w, 1, w, r, (prefix, suffix));
-    }
     let mut data = std::mem::take(out).into_data();
-    data.clear();
-    data.resize(w * h, 0.0);
-    for x in 0..w {
-        window_max(rows, &mut data, x, w, h, r, (prefix, suffix));
-    }
+    max_filter(src, (w, h), settings.radius as usize, scratch, &mut data)?;
     for (d, &v) in data.iter_mut().zip(src) {
         let m = d.max(settings.floor);
         *d = (v / m).clamp(0.0, 1.0);
