@@ -321,14 +321,15 @@ pub fn prepare(opts: &BenchOptions, n_frames: usize) -> Result<Prepared> {
     let cams: Vec<_> = scene.cameras.iter().map(render_camera).collect();
     let frames = poses
         .par_iter()
+        .enumerate()
         .map_init(
             || vec![actrack_render::synth::SynthCache::default(); cams.len()],
-            |caches, p| {
+            |caches, (i, p)| {
                 cams.iter()
                     .zip(caches.iter_mut())
                     .map(|(c, cache)| {
                         synth
-                            .render_cached(cache, c, p, opts.seed)
+                            .render_frame(cache, c, p, opts.seed, i as u64)
                             .map_err(|e| Error::Config(format!("bench: rendering a frame: {e}")))
                     })
                     .collect::<Result<Vec<_>>>()

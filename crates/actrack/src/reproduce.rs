@@ -232,6 +232,7 @@ pub const FOREGROUND_GATE: ForegroundGate = ForegroundGate {
     threshold: 10.0,
     radius: 6,
     floor: 0.2,
+    background: GateBackground::Median,
 };
 
 /// One experimental condition.
@@ -527,12 +528,11 @@ impl EdgeStage {
 
 /// An experiment (not SPEC §4.1, not the paper): G is multiplied by a foreground mask, so that
 /// the edges of what does not move (the torso's outline, the clutter) stop attracting the arm's
-/// contour. The background is the per-pixel median of the grey values over every frame of the
-/// video (offline, as from a background plate; the synthetic torso does not move and its noise
-/// field is the same in every frame, so this is an upper bound on what such a term gives). A
-/// pixel is foreground where its grey value differs from the background by more than
-/// `threshold`; the mask is dilated by a square of half-width `radius` and
-/// `G' = G · (floor + (1 − floor) · mask)`.
+/// contour. A pixel is foreground where its grey value differs from the background
+/// ([`GateBackground`]) by more than `threshold`; the mask is dilated by a square of half-width
+/// `radius` and `G' = G · (floor + (1 − floor) · mask)`. The synthetic torso does not move, so
+/// this is an upper bound on what such a term gives in real video (the sensor noise does change
+/// from frame to frame).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct ForegroundGate {
     /// Grey-level difference above which a pixel is foreground.
@@ -541,6 +541,39 @@ pub struct ForegroundGate {
     pub radius: u32,
     /// G's factor away from the foreground, in [0, 1].
     pub floor: f32,
+    /// Where the background comes from.
+    pub background: GateBackground,
+}
+
+/// The background of a [`ForegroundGate`].
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub enum GateBackground {
+    /// The per-pixel median of the grey values over every frame of the video (offline, as from
+    /// a background plate). Where the arm stays in one place for more than half of the video
+    /// (a cup held at the mouth), the arm is part of this background.
+    Median,
+    /// Causal, from what the tracker knows: the first frame, then after each frame's step
+    /// `B ← B + rate · (I − B)` at every pixel farther than `margin` pixels from the tracked
+    /// arm's silhouette (the best particle's and the reported pose's), so that the arm is not
+    /// learnt as background while the track follows it.
+    Running {
+        /// Blending rate per frame, in (0, 1].
+        rate: f32,
+        /// Pixels around the tracked silhouette that are not updated.
+        margin: f32,
+    },
+}
+
+impl GateBackground {
+    /// Blends `grey` into `background` at `rate` where `covered` is 0 (equal sizes; the
+    /// [`GateBackground::Running`] update).
+    pub fn blend(background: &mut [f32], grey: &[f32], covered: &[u8], rate: f32) {
+        for ((b, &g), &c) in background.iter_mut().zip(grey).zip(covered) {
+            if c == 0 {
+                *b += rate * (g - *b);
+            }
+        }
+    }
 }
 
 /// The per-pixel median (lower median for an even count) of `frames` (equal sizes).
@@ -558,8 +591,17 @@ fn median_image(frames: &[Vec<f32>]) -> Vec<f32> {
 }
 
 impl ForegroundGate {
-    /// Checks threshold ≥ 0, floor ∈ [0, 1].
+    /// Checks threshold ≥ 0, floor ∈ [0, 1] and, for a running background, rate ∈ (0, 1] and
+    /// margin ≥ 0.
     pub fn validate(&self) -> Result<()> {
+        if let GateBackground::Running { rate, margin } = self.background
+            && !(rate > 0.0 && rate <= 1.0 && margin.is_finite() && margin >= 0.0)
+        {
+            return Err(Error::Config(format!(
+                "foreground gate: a running background needs a rate in (0, 1] and a margin ≥ 0, \
+                 got {rate} and {margin}"
+            )));
+        }
         if !(self.threshold.is_finite() && self.threshold >= 0.0) {
             return Err(Error::Config(format!(
                 "foreground gate: threshold must be ≥ 0, got {}",
@@ -712,21 +754,37 @@ pub fn run_video(
     let mut workspaces: Vec<EdgeStage> = cams.iter().map(|_| EdgeStage::default()).collect();
     let mut synth_caches = vec![actrack_render::synth::SynthCache::default(); cams.len()];
     let mut edges: Vec<EdgeImage> = cams.iter().map(|_| EdgeImage::default()).collect();
-    // The foreground gate's backgrounds: every frame rendered once beforehand (offline).
+    // The foreground gate's backgrounds: for the median, every frame rendered once beforehand
+    // (offline); a running background starts from each view's first frame.
     let mut backgrounds: Vec<Vec<f32>> = Vec::new();
+    let running = match cond.foreground_gate {
+        Some(ForegroundGate {
+            background: GateBackground::Running { rate, margin },
+            ..
+        }) => Some((rate, f64::from(margin))),
+        _ => None,
+    };
+    let mut running_buf = (Vec::new(), Vec::new(), Vec::new());
     if let Some(gate) = &cond.foreground_gate {
         gate.validate()?;
+    }
+    if let Some(ForegroundGate {
+        background: GateBackground::Median,
+        ..
+    }) = &cond.foreground_gate
+    {
         let mut chan = Vec::new();
         for (v, cam) in cams.iter().enumerate() {
             let mut greys = Vec::new();
-            for pose in segments.iter().flat_map(|s| &s.poses) {
+            for (f, pose) in segments.iter().flat_map(|s| &s.poses).enumerate() {
                 let world = scene.pose_to_world(pose);
                 let img = synth
-                    .render_cached(
+                    .render_frame(
                         &mut synth_caches[v],
                         cam,
                         &world,
                         cond.seed.wrapping_add(v as u64),
+                        f as u64,
                     )
                     .map_err(|e| Error::Config(format!("synth: {e}")))?;
                 let view = ImageView::rgb8(&img.data, img.width, img.height)
@@ -768,11 +826,12 @@ pub fn run_video(
                     }
                 }
                 let img = synth
-                    .render_cached(
+                    .render_frame(
                         &mut synth_caches[v],
                         cam,
                         &world,
                         cond.seed.wrapping_add(v as u64),
+                        frame as u64,
                     )
                     .map_err(|e| Error::Config(format!("synth: frame {frame}: {e}")))?;
                 images.push(
@@ -786,6 +845,11 @@ pub fn run_video(
             for (v, img) in images.iter().enumerate() {
                 let view = ImageView::rgb8(img.as_raw(), img.width(), img.height())
                     .map_err(|e| Error::Config(format!("frame {frame}: {e}")))?;
+                if running.is_some() && backgrounds.len() <= v {
+                    let mut g = Vec::new();
+                    actrack_render::grey_image(view, &mut running_buf.0, &mut g);
+                    backgrounds.push(g);
+                }
                 workspaces[v].compute(
                     view,
                     scene,
@@ -812,13 +876,35 @@ pub fn run_video(
                     &edges,
                 ))
             };
-            step_ms.push(t1.elapsed().as_secs_f64() * 1e3);
             let r = FrameResult {
                 best_world: scene.pose_to_world(&estimate.best_pose),
                 smoothed_world: scene.pose_to_world(&estimate.smoothed_pose),
                 theta_world: scene.theta_to_world(estimate.theta_mean),
                 estimate,
             };
+            if let Some((rate, margin)) = running {
+                let (chan, grey, covered) = &mut running_buf;
+                for (v, img) in images.iter().enumerate() {
+                    let view = ImageView::rgb8(img.as_raw(), img.width(), img.height())
+                        .map_err(|e| Error::Config(format!("frame {frame}: {e}")))?;
+                    actrack_render::grey_image(view, chan, grey);
+                    covered.clear();
+                    covered.resize(grey.len(), 0);
+                    for pose in [&r.best_world, &r.smoothed_world] {
+                        let parts = actrack_render::project_parts(&cams[v], &geometry, pose);
+                        actrack_render::cover_parts(
+                            &parts,
+                            margin,
+                            img.width(),
+                            img.height(),
+                            covered,
+                        )
+                        .map_err(|e| Error::Config(format!("frame {frame}: {e}")))?;
+                    }
+                    GateBackground::blend(&mut backgrounds[v], grey, covered, rate);
+                }
+            }
+            step_ms.push(t1.elapsed().as_secs_f64() * 1e3);
             let row = track_row(frame, t, &names, &r);
             let mut b = row.clone();
             b.pose = r.best_world;
@@ -1176,11 +1262,12 @@ pub fn view_errors(
         let world = scene.pose_to_world(pose);
         for (v, cam) in cams.iter().enumerate() {
             let img = synth
-                .render_cached(
+                .render_frame(
                     &mut synth_caches[v],
                     cam,
                     &world,
                     cond.seed.wrapping_add(v as u64),
+                    frame as u64,
                 )
                 .map_err(|e| Error::Config(format!("synth: frame {frame}: {e}")))?;
             let view = ImageView::rgb8(&img.data, img.width, img.height)
@@ -1282,6 +1369,7 @@ mod tests {
             threshold: 10.0,
             radius: 1,
             floor: 0.25,
+            background: GateBackground::Median,
         };
         let mut g = EdgeImage::constant(w as u32, h as u32, 0.8).unwrap();
         let mut scratch = GateScratch::default();
@@ -1301,7 +1389,26 @@ mod tests {
             ..gate
         };
         assert!(nan.validate().is_err());
+        for (rate, margin) in [(0.0, 5.0), (1.5, 5.0), (f32::NAN, 5.0), (0.1, -1.0)] {
+            let bad = ForegroundGate {
+                background: GateBackground::Running { rate, margin },
+                ..gate
+            };
+            assert!(bad.validate().is_err(), "{rate} {margin}");
+        }
+        let running = ForegroundGate {
+            background: GateBackground::Running {
+                rate: 0.1,
+                margin: 5.0,
+            },
+            ..gate
+        };
+        assert!(running.validate().is_ok());
         assert!(gate.apply(view, &bg[1..], &mut scratch, &mut g).is_err());
+        // The running update blends only the uncovered pixels.
+        let mut b = vec![100.0f32, 100.0, 100.0];
+        GateBackground::blend(&mut b, &[200.0, 200.0, 50.0], &[0, 1, 0], 0.25);
+        assert_eq!(b, [125.0, 100.0, 87.5]);
     }
 
     #[test]

@@ -137,7 +137,8 @@ pub fn scene_synth(scene: &Scene, lengths: [f64; 2]) -> SceneSynth {
 }
 
 /// Renders the frames of world poses through the scene's first camera (the background is the
-/// same in every frame: one seed).
+/// same in every frame: one seed; the sensor noise changes from frame to frame,
+/// [`actrack_render::synth::SceneSynth::render_frame`]).
 pub fn render_frames(
     scene: &Scene,
     poses_world: &[[f64; 9]],
@@ -153,7 +154,7 @@ pub fn render_frames(
             actrack_render::synth::SynthCache::default,
             |cache, (i, p)| {
                 let img = synth
-                    .render_cached(cache, &cam, p, seed)
+                    .render_frame(cache, &cam, p, seed, i as u64)
                     .map_err(|e| Error::Config(format!("synth: frame {i}: {e}")))?;
                 RgbImage::from_raw(img.width, img.height, img.data)
                     .ok_or_else(|| Error::Config(format!("synth: frame {i}: bad image buffer")))

@@ -4,7 +4,7 @@
 use nalgebra::{Vector2, Vector3};
 use tiny_skia::{FillRule, Mask, PathBuilder, Transform};
 
-use crate::{ArmGeometry, Camera, camera::NEAR_PLANE};
+use crate::{ArmGeometry, Camera, RenderError, camera::NEAR_PLANE};
 
 /// Largest projected coordinate (pixels) a part may have; parts beyond this (points within
 /// millimetres of the camera plane) are skipped rather than rasterised.
@@ -165,7 +165,6 @@ impl Prepared {
 
     /// Signed distance (exact for discs and capsules, approximate for ellipses), negative
     /// inside.
-    #[cfg(test)]
     fn signed_distance(&self, x: Vector2<f64>) -> f64 {
         match *self {
             Self::Circle { c, r } => (x - c).norm() - r,
@@ -910,6 +909,55 @@ pub fn project_parts(camera: &Camera, geometry: &ArmGeometry, pose: &[f64; 9]) -
 /// appended to `out`.
 pub(crate) fn part_polygon(part: &Part2, out: &mut Vec<[f64; 2]>) {
     Prepared::new(part).walk_outline(1.0, true, |x| out.push([x.x, x.y]));
+}
+
+/// Sets `mask[v · width + u] = 1` for every pixel whose centre (u, v) lies in one of `parts` or
+/// within `grow` pixels of it: the union silhouette grown by `grow` (exact for discs and
+/// capsules; for an ellipse the inside is exact and the growth is measured along its minor
+/// axis, so it reaches less far along the major one). Other pixels are left as they are. A
+/// non-finite part or `grow` covers nothing.
+///
+/// # Errors
+/// [`RenderError::InvalidImage`] if `mask` does not hold `width · height` values.
+pub fn cover_parts(
+    parts: &[Part2],
+    grow: f64,
+    width: u32,
+    height: u32,
+    mask: &mut [u8],
+) -> Result<(), RenderError> {
+    let (w, h) = (width as usize, height as usize);
+    if mask.len() != w * h {
+        return Err(RenderError::InvalidImage(format!(
+            "cover_parts: a {width}×{height} mask needs {} values, got {}",
+            w * h,
+            mask.len()
+        )));
+    }
+    if !grow.is_finite() {
+        return Ok(());
+    }
+    for part in parts {
+        let p = Prepared::new(part);
+        let b = p.bbox();
+        if !b.iter().all(|x| x.is_finite()) {
+            continue;
+        }
+        let lo = |x: f64| (x - grow).ceil().max(0.0) as usize;
+        let hi = |x: f64, n: usize| ((x + grow).floor().min(n as f64 - 1.0)).max(-1.0);
+        let (u1, v1) = (hi(b[2], w), hi(b[3], h));
+        if u1 < 0.0 || v1 < 0.0 {
+            continue;
+        }
+        for v in lo(b[1])..=v1 as usize {
+            for u in lo(b[0])..=u1 as usize {
+                if p.signed_distance(Vector2::new(u as f64, v as f64)) <= grow {
+                    mask[v * w + u] = 1;
+                }
+            }
+        }
+    }
+    Ok(())
 }
 
 /// A part in the form of the per-sample "more than [`INSIDE_TOL`] inside" test, four lanes at

@@ -67,7 +67,9 @@ pub mod synth;
 
 pub use arm::{ArmGeometry, ArmParts, correct_arm};
 pub use camera::{Camera, NEAR_PLANE};
-pub use contour::{ContourMethod, Part2, RenderScratch, contour_points, project_parts};
+pub use contour::{
+    ContourMethod, Part2, RenderScratch, contour_points, cover_parts, project_parts,
+};
 pub use edge::{EdgeImage, EdgeParams, EdgeWorkspace, grey_image};
 pub use error::RenderError;
 #[cfg(feature = "gpu")]

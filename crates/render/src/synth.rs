@@ -121,13 +121,32 @@ impl SceneSynth {
     /// [`SceneSynth::render`] for a stream of frames: the parts that do not depend on the pose
     /// (background, clutter, table, and the noise field, which the seed fixes) are drawn once
     /// into `cache` and reused while `self`, `camera` and `seed` stay the same. The bytes are
-    /// those of [`SceneSynth::render`].
+    /// those of [`SceneSynth::render`]. The noise is the same in every frame; for video, whose
+    /// noise changes from frame to frame, use [`SceneSynth::render_frame`].
     pub fn render_cached(
         &self,
         cache: &mut SynthCache,
         camera: &Camera,
         pose: &[f64; 9],
         seed: u64,
+    ) -> Result<ImageRgb8, RenderError> {
+        self.render_frame(cache, camera, pose, seed, 0)
+    }
+
+    /// Frame `frame` of a video: [`SceneSynth::render_cached`] with sensor noise that changes
+    /// from frame to frame. The noise of frame `frame` is a window of the seed's noise field
+    /// (drawn once, [`NOISE_MARGIN`] values longer than a frame) at an offset that a hash of
+    /// (`seed`, `frame`) picks, so every pixel's noise is a different draw in every frame (up
+    /// to the offsets' collisions) while the scene stays fixed. Frame 0 has offset 0: its bytes
+    /// are those of [`SceneSynth::render`]. Deterministic in (`self`, `camera`, `pose`, `seed`,
+    /// `frame`).
+    pub fn render_frame(
+        &self,
+        cache: &mut SynthCache,
+        camera: &Camera,
+        pose: &[f64; 9],
+        seed: u64,
+        frame: u64,
     ) -> Result<ImageRgb8, RenderError> {
         camera.validate()?;
         self.geometry.validate()?;
@@ -147,7 +166,11 @@ impl SceneSynth {
             if let Some(t) = &self.table {
                 self.draw_table(&mut pix, camera, t);
             }
-            let noise = noise_field(pix.data().len() / 4 * 3, self.noise_sigma, &mut rng);
+            let noise = noise_field(
+                pix.data().len() / 4 * 3 + NOISE_MARGIN,
+                self.noise_sigma,
+                &mut rng,
+            );
             cache.layer = Some(Layer {
                 synth: self.clone(),
                 camera: camera.clone(),
@@ -244,7 +267,11 @@ impl SceneSynth {
         for (_, part, color, linear) in &items {
             draw_part(&mut pix, part, *color, *linear, &mut poly);
         }
-        Ok(to_rgb(&pix, layer.noise.as_deref()))
+        let noise = layer.noise.as_deref().map(|n| {
+            let offset = noise_offset(seed, frame);
+            &n[offset..]
+        });
+        Ok(to_rgb(&pix, noise))
     }
 
     fn draw_table(&self, pix: &mut Pixmap, camera: &Camera, t: &Table) {
@@ -563,6 +590,23 @@ fn clutter(pix: &mut Pixmap, rng: &mut Pcg64Mcg, n: usize) {
 fn noise_field(len: usize, sigma: f64, rng: &mut Pcg64Mcg) -> Option<Vec<f64>> {
     let d = Normal::new(0.0, sigma).ok().filter(|_| sigma > 0.0)?;
     Some((0..len).map(|_| d.sample(rng)).collect())
+}
+
+/// How many noise values the noise field holds beyond one frame's: the range of
+/// [`SceneSynth::render_frame`]'s per-frame offsets.
+pub const NOISE_MARGIN: usize = 3 << 16;
+
+/// The offset into the noise field of frame `frame` (0 for frame 0): a multiple of 3 (R, G, B
+/// stay aligned) below [`NOISE_MARGIN`], from a SplitMix64 hash of (`seed`, `frame`).
+fn noise_offset(seed: u64, frame: u64) -> usize {
+    if frame == 0 {
+        return 0;
+    }
+    let mut z = seed ^ frame.wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^= z >> 31;
+    3 * (z % (NOISE_MARGIN as u64 / 3)) as usize
 }
 
 /// The pose-independent part of a frame ([`SceneSynth::render_cached`]).

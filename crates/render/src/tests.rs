@@ -153,6 +153,140 @@ fn cached_synthesis_gives_the_bytes_of_render() {
 }
 
 #[test]
+fn video_noise_changes_from_frame_to_frame() {
+    let cam = camera(320, 240);
+    let s = scene();
+    let pose = poses()[0];
+    let mut quiet = scene();
+    quiet.noise_sigma = 0.0;
+    let clean = quiet.render(&cam, &pose, 7).unwrap();
+    let mut cache = crate::synth::SynthCache::default();
+    // Frame 0 is `render`'s frame; without noise every frame is the same.
+    assert!(
+        s.render_frame(&mut cache, &cam, &pose, 7, 0).unwrap() == s.render(&cam, &pose, 7).unwrap()
+    );
+    for f in [1, 2, 1000] {
+        assert!(quiet.render_frame(&mut cache, &cam, &pose, 7, f).unwrap() == clean);
+    }
+    // The noise of frames 1 and 2 (frame minus the noiseless frame): σ² plus the rounding's
+    // 1/12 each, and uncorrelated with each other and with frame 0's, pixel by pixel.
+    let mut noise = |f: u64| -> Vec<f64> {
+        let img = s.render_frame(&mut cache, &cam, &pose, 7, f).unwrap();
+        img.data
+            .iter()
+            .zip(&clean.data)
+            .map(|(&a, &b)| f64::from(a) - f64::from(b))
+            .collect()
+    };
+    let (n0, n1, n2) = (noise(0), noise(1), noise(2));
+    assert!(n1 == noise(1), "frame 1 is deterministic");
+    let dot =
+        |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>() / a.len() as f64;
+    let var = s.noise_sigma * s.noise_sigma + 1.0 / 12.0;
+    for n in [&n0, &n1, &n2] {
+        assert!(
+            (dot(n, n) / var - 1.0).abs() < 0.05,
+            "variance {}",
+            dot(n, n)
+        );
+    }
+    for (a, b) in [(&n0, &n1), (&n1, &n2), (&n0, &n2)] {
+        assert!(
+            dot(a, b).abs() / var < 0.02,
+            "correlation {}",
+            dot(a, b) / var
+        );
+    }
+}
+
+#[test]
+fn cover_parts_matches_brute_force() {
+    use crate::{Part2, cover_parts};
+    let (w, h) = (120u32, 90u32);
+    let capsules = [
+        ([20.0, 30.0], [95.0, 55.0], 12.0, 6.0),
+        ([60.0, 10.0], [62.0, 80.0], 4.0, 9.5),
+        ([-20.0, 40.0], [30.0, 100.0], 8.0, 8.0), // cut by the border
+        ([50.0, 50.0], [51.0, 50.5], 10.0, 3.0),  // one disc holds the other
+    ];
+    let ellipse = ([70.0, 40.0], 18.0, 7.0, 0.6);
+    // Brute force: a capsule is the union of the discs c(t), r(t), t ∈ [0, 1].
+    let dist = |(c0, c1, r0, r1): ([f64; 2], [f64; 2], f64, f64), x: [f64; 2]| {
+        (0..=4000)
+            .map(|i| {
+                let t = f64::from(i) / 4000.0;
+                let c = [c0[0] + t * (c1[0] - c0[0]), c0[1] + t * (c1[1] - c0[1])];
+                (x[0] - c[0]).hypot(x[1] - c[1]) - (r0 + t * (r1 - r0))
+            })
+            .fold(f64::INFINITY, f64::min)
+    };
+    for grow in [0.0, 3.0] {
+        for cap in capsules {
+            let (c0, c1, r0, r1) = cap;
+            let mut mask = vec![0u8; (w * h) as usize];
+            cover_parts(&[Part2::Capsule { c0, c1, r0, r1 }], grow, w, h, &mut mask).unwrap();
+            for v in 0..h {
+                for u in 0..w {
+                    let d = dist(cap, [f64::from(u), f64::from(v)]);
+                    if (d - grow).abs() > 0.02 {
+                        assert_eq!(
+                            mask[(v * w + u) as usize] == 1,
+                            d < grow,
+                            "({u}, {v}) {cap:?}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+    let (c, a, b, angle) = ellipse;
+    let mut mask = vec![0u8; (w * h) as usize];
+    cover_parts(&[Part2::Ellipse { c, a, b, angle }], 0.0, w, h, &mut mask).unwrap();
+    let mut inside = 0;
+    for v in 0..h {
+        for u in 0..w {
+            let (x, y) = (f64::from(u) - c[0], f64::from(v) - c[1]);
+            let (xa, xb) = (
+                x * angle.cos() + y * angle.sin(),
+                -x * angle.sin() + y * angle.cos(),
+            );
+            let rho = (xa / a).powi(2) + (xb / b).powi(2);
+            if (rho - 1.0).abs() > 1e-9 {
+                assert_eq!(mask[(v * w + u) as usize] == 1, rho < 1.0, "({u}, {v})");
+                inside += usize::from(rho < 1.0);
+            }
+        }
+    }
+    // About π·a·b pixels.
+    assert!((inside as f64 / (std::f64::consts::PI * a * b) - 1.0).abs() < 0.05);
+    // The union: covered pixels are left covered, the rest untouched.
+    let mut both = mask.clone();
+    let (c0, c1, r0, r1) = capsules[0];
+    cover_parts(&[Part2::Capsule { c0, c1, r0, r1 }], 0.0, w, h, &mut both).unwrap();
+    assert!(mask.iter().zip(&both).all(|(m, b)| b >= m));
+    assert!(both.iter().filter(|&&x| x == 1).count() > inside);
+    // Bad sizes give an error; a non-finite growth or part covers nothing.
+    assert!(cover_parts(&[], 0.0, w, h, &mut [0u8; 3]).is_err());
+    let mut none = vec![0u8; (w * h) as usize];
+    cover_parts(
+        &[Part2::Capsule { c0, c1, r0, r1 }],
+        f64::NAN,
+        w,
+        h,
+        &mut none,
+    )
+    .unwrap();
+    let nan = Part2::Capsule {
+        c0: [f64::NAN, 1.0],
+        c1,
+        r0,
+        r1,
+    };
+    cover_parts(&[nan], 1.0, w, h, &mut none).unwrap();
+    assert!(none.iter().all(|&x| x == 0));
+}
+
+#[test]
 fn likelihood_peaks_at_true_pose() {
     let cam = camera(640, 480);
     let s = scene();
