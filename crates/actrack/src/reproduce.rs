@@ -592,6 +592,60 @@ impl GateBackground {
     }
 }
 
+/// A [`GateBackground::Running`] background of one view, with its buffers.
+#[derive(Debug, Default)]
+pub struct RunningBackground {
+    background: Vec<f32>,
+    chan: Vec<f32>,
+    grey: Vec<f32>,
+    covered: Vec<u8>,
+}
+
+impl RunningBackground {
+    /// The background (grey values, row-major); `None` before the first frame.
+    pub fn background(&self) -> Option<&[f32]> {
+        (!self.background.is_empty()).then_some(self.background.as_slice())
+    }
+
+    /// Starts the background from `view`'s grey values unless it has started.
+    pub fn start(&mut self, view: ImageView<'_>) {
+        if self.background.is_empty() {
+            actrack_render::grey_image(view, &mut self.chan, &mut self.background);
+        }
+    }
+
+    /// After a frame's step: blends `view` in at `rate` ([`GateBackground::blend`]) away from
+    /// the silhouettes of the `tracked` poses (world, as rendered) grown by `margin` pixels.
+    pub fn update(
+        &mut self,
+        view: ImageView<'_>,
+        camera: &actrack_render::Camera,
+        geometry: &actrack_render::ArmGeometry,
+        tracked: &[&[f64; 9]],
+        rate: f32,
+        margin: f64,
+    ) -> Result<()> {
+        self.start(view);
+        let (w, h) = view.size();
+        actrack_render::grey_image(view, &mut self.chan, &mut self.grey);
+        if self.grey.len() != self.background.len() {
+            return Err(Error::Config(format!(
+                "foreground gate: a {w}×{h} frame against a background of {} pixels",
+                self.background.len()
+            )));
+        }
+        self.covered.clear();
+        self.covered.resize(self.grey.len(), 0);
+        for pose in tracked {
+            let parts = actrack_render::project_parts(camera, geometry, pose);
+            actrack_render::cover_parts(&parts, margin, w, h, &mut self.covered)
+                .map_err(|e| Error::Config(format!("foreground gate: {e}")))?;
+        }
+        GateBackground::blend(&mut self.background, &self.grey, &self.covered, rate);
+        Ok(())
+    }
+}
+
 /// The per-pixel median (lower median for an even count) of `frames` (equal sizes).
 fn median_image(frames: &[Vec<f32>]) -> Vec<f32> {
     let n = frames.first().map_or(0, Vec::len);
@@ -780,7 +834,8 @@ pub fn run_video(
         }) => Some((rate, f64::from(margin))),
         _ => None,
     };
-    let mut running_buf = (Vec::new(), Vec::new(), Vec::new());
+    let mut running_bgs: Vec<RunningBackground> =
+        cams.iter().map(|_| RunningBackground::default()).collect();
     if let Some(gate) = &cond.foreground_gate {
         gate.validate()?;
     }
@@ -861,19 +916,13 @@ pub fn run_video(
             for (v, img) in images.iter().enumerate() {
                 let view = ImageView::rgb8(img.as_raw(), img.width(), img.height())
                     .map_err(|e| Error::Config(format!("frame {frame}: {e}")))?;
-                if running.is_some() && backgrounds.len() <= v {
-                    let mut g = Vec::new();
-                    actrack_render::grey_image(view, &mut running_buf.0, &mut g);
-                    backgrounds.push(g);
-                }
-                workspaces[v].compute(
-                    view,
-                    scene,
-                    cond,
-                    frame,
-                    backgrounds.get(v).map(Vec::as_slice),
-                    &mut edges[v],
-                )?;
+                let background = if running.is_some() {
+                    running_bgs[v].start(view);
+                    running_bgs[v].background()
+                } else {
+                    backgrounds.get(v).map(Vec::as_slice)
+                };
+                workspaces[v].compute(view, scene, cond, frame, background, &mut edges[v])?;
             }
             let estimate = if let Some(settings) = cond.short_contour_penalty {
                 tracker.step(&ShortContourPenalty {
@@ -899,25 +948,13 @@ pub fn run_video(
                 estimate,
             };
             if let Some((rate, margin)) = running {
-                let (chan, grey, covered) = &mut running_buf;
-                for (v, img) in images.iter().enumerate() {
+                for ((img, cam), rb) in images.iter().zip(&cams).zip(&mut running_bgs) {
+                    let err = |e: Error| Error::Config(format!("frame {frame}: {e}"));
                     let view = ImageView::rgb8(img.as_raw(), img.width(), img.height())
                         .map_err(|e| Error::Config(format!("frame {frame}: {e}")))?;
-                    actrack_render::grey_image(view, chan, grey);
-                    covered.clear();
-                    covered.resize(grey.len(), 0);
-                    for pose in [&r.best_world, &r.smoothed_world] {
-                        let parts = actrack_render::project_parts(&cams[v], &geometry, pose);
-                        actrack_render::cover_parts(
-                            &parts,
-                            margin,
-                            img.width(),
-                            img.height(),
-                            covered,
-                        )
-                        .map_err(|e| Error::Config(format!("frame {frame}: {e}")))?;
-                    }
-                    GateBackground::blend(&mut backgrounds[v], grey, covered, rate);
+                    let tracked = [&r.best_world, &r.smoothed_world];
+                    rb.update(view, cam, &geometry, &tracked, rate, margin)
+                        .map_err(err)?;
                 }
             }
             step_ms.push(t1.elapsed().as_secs_f64() * 1e3);
@@ -1320,6 +1357,28 @@ mod tests {
         [0.0, 0.0, 0.0, 0.05, 0.12, -0.26, -0.1, 0.12, 0.12],
     ];
 
+    /// The reproduce camera, a table in front of the actor, the default arm.
+    fn test_scene() -> Scene {
+        let o = Vector3::from(SHOULDER);
+        Scene {
+            cameras: vec![camera("camera0", CAMERA0.0, CAMERA0.1).unwrap()],
+            table: TableRegion {
+                placement: Placement {
+                    origin: Vector3::new(o.x, o.y + 0.5, o.z - TABLE_BELOW_SHOULDER),
+                    yaw: 0.0,
+                },
+                half_extents: [0.3, 0.2],
+            },
+            actor: Placement {
+                origin: o,
+                yaw: 0.0,
+            },
+            side: Side::Right,
+            arm: ArmGeometry::default(),
+            edges: EdgeSettings::default(),
+        }
+    }
+
     /// The per-pixel median and the dilation against brute force; the gate keeps G where a
     /// frame differs from the background (and its neighbourhood) and scales it elsewhere.
     #[test]
@@ -1421,6 +1480,59 @@ mod tests {
         };
         assert!(running.validate().is_ok());
         assert!(gate.apply(view, &bg[1..], &mut scratch, &mut g).is_err());
+        // The running background of a rendered view: started from the first frame (arm at
+        // POSES[0]), then frame 2 (arm at POSES[2]) blended in away from the tracked arm.
+        let scene = test_scene();
+        let lengths = [0.3, 0.45];
+        let synth = scene_synth(&scene, lengths);
+        let cam = render_camera(&scene.cameras[0]);
+        let geometry = render_arm(&scene, lengths);
+        let frames: Vec<_> = [POSES[0], POSES[2]]
+            .iter()
+            .map(|p| synth.render(&cam, &scene.pose_to_world(p), 3).unwrap())
+            .collect();
+        let views: Vec<_> = frames
+            .iter()
+            .map(|f| ImageView::rgb8(&f.data, f.width, f.height).unwrap())
+            .collect();
+        let greys: Vec<Vec<f32>> = views
+            .iter()
+            .map(|&v| {
+                let mut g = Vec::new();
+                actrack_render::grey_image(v, &mut Vec::new(), &mut g);
+                g
+            })
+            .collect();
+        let mut rb = RunningBackground::default();
+        assert!(rb.background().is_none());
+        rb.start(views[0]);
+        assert!(rb.background() == Some(greys[0].as_slice()));
+        let tracked = scene.pose_to_world(&POSES[2]);
+        rb.update(views[1], &cam, &geometry, &[&tracked], 0.5, 8.0)
+            .unwrap();
+        let mut covered = vec![0u8; greys[0].len()];
+        let parts = actrack_render::project_parts(&cam, &geometry, &tracked);
+        actrack_render::cover_parts(&parts, 8.0, cam.width, cam.height, &mut covered).unwrap();
+        assert!(covered.iter().any(|&c| c == 1) && covered.iter().any(|&c| c == 0));
+        let bg = rb.background().unwrap();
+        let mut moved = 0;
+        for i in 0..bg.len() {
+            let want = if covered[i] == 1 {
+                greys[0][i]
+            } else {
+                greys[0][i] + 0.5 * (greys[1][i] - greys[0][i])
+            };
+            assert!((bg[i] - want).abs() < 1e-4, "pixel {i}");
+            moved += usize::from(covered[i] == 0 && (greys[1][i] - greys[0][i]).abs() > 10.0);
+        }
+        // Where the first frame's arm was (and the tracked arm is not) the background moves
+        // toward what is there now.
+        assert!(moved > 100, "{moved}");
+        let small = ImageView::grey8(&px, w as u32, h as u32).unwrap();
+        assert!(
+            rb.update(small, &cam, &geometry, &[&tracked], 0.5, 8.0)
+                .is_err()
+        );
         // The running update blends only the uncovered pixels.
         let mut b = vec![100.0f32, 100.0, 100.0];
         GateBackground::blend(&mut b, &[200.0, 200.0, 50.0], &[0, 1, 0], 0.25);
@@ -1468,24 +1580,7 @@ mod tests {
     /// score of exactly the poses with shorter contours.
     #[test]
     fn short_contour_penalty_against_spec() {
-        let o = Vector3::from(SHOULDER);
-        let scene = Scene {
-            cameras: vec![camera("camera0", CAMERA0.0, CAMERA0.1).unwrap()],
-            table: TableRegion {
-                placement: Placement {
-                    origin: Vector3::new(o.x, o.y + 0.5, o.z - TABLE_BELOW_SHOULDER),
-                    yaw: 0.0,
-                },
-                half_extents: [0.3, 0.2],
-            },
-            actor: Placement {
-                origin: o,
-                yaw: 0.0,
-            },
-            side: Side::Right,
-            arm: ArmGeometry::default(),
-            edges: EdgeSettings::default(),
-        };
+        let scene = test_scene();
         let lengths = [0.30, 0.46];
         let cond = Condition::monocular("t");
         let Rig {
