@@ -1513,7 +1513,7 @@ mod tests {
         let mut covered = vec![0u8; greys[0].len()];
         let parts = actrack_render::project_parts(&cam, &geometry, &tracked);
         actrack_render::cover_parts(&parts, 8.0, cam.width, cam.height, &mut covered).unwrap();
-        assert!(covered.iter().any(|&c| c == 1) && covered.iter().any(|&c| c == 0));
+        assert!(covered.contains(&1) && covered.contains(&0));
         let bg = rb.background().unwrap();
         let mut moved = 0;
         for i in 0..bg.len() {
