@@ -769,6 +769,28 @@ struct Rig {
     likelihood: LikelihoodModel,
 }
 
+/// Frame `frame` of view `view` as every pass of a condition renders it (the view's seed, the
+/// frame's noise), so that the gate's pre-pass, the tracked video and the diagnostics see the
+/// same bytes.
+fn render_view(
+    synth: &actrack_render::synth::SceneSynth,
+    cache: &mut actrack_render::synth::SynthCache,
+    cam: &actrack_render::Camera,
+    world: &[f64; 9],
+    cond: &Condition,
+    (view, frame): (usize, usize),
+) -> Result<actrack_render::ImageRgb8> {
+    synth
+        .render_frame(
+            cache,
+            cam,
+            world,
+            cond.seed.wrapping_add(view as u64),
+            frame as u64,
+        )
+        .map_err(|e| Error::Config(format!("synth: frame {frame}: {e}")))
+}
+
 fn rig(scene: &Scene, cond: &Condition, lengths: [f64; 2]) -> Result<Rig> {
     let mut synth = scene_synth(scene, lengths);
     synth.clutter = cond.clutter;
@@ -827,11 +849,9 @@ pub fn run_video(
     // The foreground gate's backgrounds: for the median, every frame rendered once beforehand
     // (offline); a running background starts from each view's first frame.
     let mut backgrounds: Vec<Vec<f32>> = Vec::new();
-    let running = match cond.foreground_gate {
-        Some(ForegroundGate {
-            background: GateBackground::Running { rate, margin },
-            ..
-        }) => Some((rate, f64::from(margin))),
+    let background = cond.foreground_gate.map(|g| g.background);
+    let running = match background {
+        Some(GateBackground::Running { rate, margin }) => Some((rate, f64::from(margin))),
         _ => None,
     };
     let mut running_bgs: Vec<RunningBackground> =
@@ -839,25 +859,13 @@ pub fn run_video(
     if let Some(gate) = &cond.foreground_gate {
         gate.validate()?;
     }
-    if let Some(ForegroundGate {
-        background: GateBackground::Median,
-        ..
-    }) = &cond.foreground_gate
-    {
+    if background == Some(GateBackground::Median) {
         let mut chan = Vec::new();
         for (v, cam) in cams.iter().enumerate() {
             let mut greys = Vec::new();
             for (f, pose) in segments.iter().flat_map(|s| &s.poses).enumerate() {
                 let world = scene.pose_to_world(pose);
-                let img = synth
-                    .render_frame(
-                        &mut synth_caches[v],
-                        cam,
-                        &world,
-                        cond.seed.wrapping_add(v as u64),
-                        f as u64,
-                    )
-                    .map_err(|e| Error::Config(format!("synth: {e}")))?;
+                let img = render_view(&synth, &mut synth_caches[v], cam, &world, cond, (v, f))?;
                 let view = ImageView::rgb8(&img.data, img.width, img.height)
                     .map_err(|e| Error::Config(format!("synth: {e}")))?;
                 let mut g = Vec::new();
@@ -896,15 +904,7 @@ pub fn run_video(
                         inside += 1;
                     }
                 }
-                let img = synth
-                    .render_frame(
-                        &mut synth_caches[v],
-                        cam,
-                        &world,
-                        cond.seed.wrapping_add(v as u64),
-                        frame as u64,
-                    )
-                    .map_err(|e| Error::Config(format!("synth: frame {frame}: {e}")))?;
+                let img = render_view(&synth, &mut synth_caches[v], cam, &world, cond, (v, frame))?;
                 images.push(
                     RgbImage::from_raw(img.width, img.height, img.data).ok_or_else(|| {
                         Error::Config(format!("synth: frame {frame}: bad image buffer"))
@@ -1314,15 +1314,7 @@ pub fn view_errors(
         actrack_render::correct_arm(&geometry, &mut truth, None);
         let world = scene.pose_to_world(pose);
         for (v, cam) in cams.iter().enumerate() {
-            let img = synth
-                .render_frame(
-                    &mut synth_caches[v],
-                    cam,
-                    &world,
-                    cond.seed.wrapping_add(v as u64),
-                    frame as u64,
-                )
-                .map_err(|e| Error::Config(format!("synth: frame {frame}: {e}")))?;
+            let img = render_view(&synth, &mut synth_caches[v], cam, &world, cond, (v, frame))?;
             let view = ImageView::rgb8(&img.data, img.width, img.height)
                 .map_err(|e| Error::Config(format!("frame {frame}: {e}")))?;
             ws.compute(view, &scene, cond, frame, None, &mut edges[v])?;
