@@ -82,7 +82,7 @@ pub(crate) enum Prepared {
 }
 
 impl Prepared {
-    fn new(part: &Part2) -> Self {
+    pub(crate) fn new(part: &Part2) -> Self {
         match *part {
             Part2::Capsule { c0, c1, r0, r1 } => {
                 let (c0, c1) = (Vector2::from(c0), Vector2::from(c1));

@@ -63,6 +63,7 @@ pub mod gpu;
 mod image;
 mod likelihood;
 mod local_norm;
+mod silhouette;
 pub mod synth;
 
 pub use arm::{ArmGeometry, ArmParts, correct_arm};
@@ -77,6 +78,7 @@ pub use gpu::{GpuError, GpuLikelihood};
 pub use image::{ImageRgb8, ImageView};
 pub use likelihood::{LikelihoodModel, SamplingMode};
 pub use local_norm::{LocalNorm, LocalNormScratch, local_normalise, max_filter};
+pub use silhouette::{ForegroundCounts, MAX_SILHOUETTE_PARTS, Overlap};
 
 /// An arm pose as it crosses crate boundaries: (p shoulder xyz, q elbow xyz, r fingertip xyz),
 /// metres, world frame.
