@@ -10,7 +10,7 @@
 //! repetitions 1 and 3 instead of the held-out subjects), `--camera1 ex,ey,ez,tx,ty,tz` (the
 //! second camera, actor frame), `--gamma2 G` (γ of the two-view run), `--no-body` (no torso and
 //! head in the synthesis), `--particles N`, `--contour raster|analytic`, `--gamma G` and
-//! `--short-contour-penalty λ,q`, `--speed-range LO,HI`, `--local-norm R,FLOOR`, `--penalty-long`, `--seed N`, `--max-stay P`, `--pose-sampling mean|S`, `--median-window N`, `--phase-jump R`, `--foreground-gate T,R,F` (override every selected condition's), `--running-background RATE,MARGIN` (the gate's background: causal, [`actrack::reproduce::GateBackground::Running`]), `--diag` (per-view ε̄ of the true pose against perturbed poses and
+//! `--short-contour-penalty λ,q`, `--speed-range LO,HI`, `--local-norm R,FLOOR`, `--penalty-long`, `--seed N`, `--max-stay P`, `--pose-sampling mean|S`, `--median-window N`, `--phase-jump R`, `--foreground-gate T,R,F` (override every selected condition's), `--running-background RATE,MARGIN` (the gate's background: causal, [`actrack::reproduce::GateBackground::Running`]), `--silhouette W` (the silhouette term, `Condition::silhouette`), `--diag` (per-view ε̄ of the true pose against perturbed poses and
 //! the share of its contour the body hides; no tracking), `--trace NAME` (per-frame track and
 //! per-view ε̄ of truth and best particle) with `--dump DIR` (views of a few frames).
 
@@ -70,6 +70,8 @@ struct Args {
     /// A running background (rate, margin px) for the gate (FOREGROUND_GATE's settings where
     /// neither the condition nor `--foreground-gate` has one).
     running_background: Option<[f64; 2]>,
+    /// The silhouette term's weight (`Condition::silhouette`) in every selected condition.
+    silhouette: Option<f64>,
     /// Override every selected condition's seed (filter and backgrounds).
     seed: Option<u64>,
     /// Local normalisation of G (radius px, floor) in every selected condition.
@@ -102,6 +104,7 @@ impl Args {
             || self.max_stay.is_some()
             || self.foreground_gate.is_some()
             || self.running_background.is_some()
+            || self.silhouette.is_some()
             || self.pose_sampling.is_some()
             || self.median_window.is_some()
             || self.phase_jump.is_some()
@@ -159,6 +162,7 @@ fn args() -> Args {
         phase_jump: None,
         foreground_gate: None,
         running_background: None,
+        silhouette: None,
         diag: false,
         trace: None,
         dump: None,
@@ -234,6 +238,12 @@ fn args() -> Args {
                     it.next(),
                     "--running-background wants RATE,MARGIN (e.g. 0.1,8)",
                 ));
+            }
+            "--silhouette" => {
+                a.silhouette = Some(it.next().and_then(|x| x.parse().ok()).unwrap_or_else(|| {
+                    eprintln!("reproduce: --silhouette wants a weight (e.g. 1)");
+                    std::process::exit(2);
+                }));
             }
             "--gamma" => a.gamma = it.next().and_then(|x| x.parse().ok()),
             "--particles" => a.particles = it.next().and_then(|x| x.parse().ok()),
@@ -916,6 +926,7 @@ fn main() -> Res<()> {
                     ..g.unwrap_or(actrack::reproduce::FOREGROUND_GATE)
                 }),
             },
+            silhouette: a.silhouette.or(c.silhouette),
             ..c
         };
         let (r, runs) = run_condition(m, tr, &c)?;

@@ -18,7 +18,8 @@ use std::time::Instant;
 
 use actrack_pf::{PoseSampling, TableRegion as PfRegion, Tracker, TrackerConfig};
 use actrack_render::{
-    ContourMethod, EdgeImage, EdgeWorkspace, ImageView, LikelihoodModel, contour_points,
+    ContourMethod, EdgeImage, EdgeWorkspace, ForegroundCounts, ImageView, LikelihoodModel, Overlap,
+    contour_points,
 };
 use image::RgbImage;
 use nalgebra::Vector3;
@@ -306,6 +307,9 @@ pub struct Condition {
     /// Multiply G by a dilated foreground mask against the video's per-pixel median
     /// ([`ForegroundGate`]; an experiment, not SPEC §4.1); `None`: SPEC's G.
     pub foreground_gate: Option<ForegroundGate>,
+    /// With `foreground_gate` and `short_contour_penalty`: add the silhouette term of this
+    /// weight ([`ShortContourPenalty`]; not in the paper); `None`: contour only.
+    pub silhouette: Option<f64>,
 }
 
 impl Condition {
@@ -335,6 +339,7 @@ impl Condition {
             median_window: 5,
             phase_jump: None,
             foreground_gate: None,
+            silhouette: None,
         }
     }
 
@@ -450,6 +455,13 @@ pub fn tracker_config(model: &ActionModel, cond: &Condition) -> Result<TrackerCo
 /// missing point with error λ: ε = (Σ (1 − G)² + λ·max(0, n̄ − n)) / max(n, n̄). Poses with
 /// n ≥ n̄ get SPEC's ε̄. Deterministic for any thread count (n̄ is taken after the parallel
 /// part).
+///
+/// With `silhouette` (weight w and each view's [`ForegroundCounts`] of the undilated foreground
+/// mask of a [`ForegroundGate`]), each view adds the silhouette error of Deutscher et al.: with
+/// F foreground pixels, S pixels of the pose's union silhouette and I of them foreground,
+/// e = ((F − I)/F + (S − I)/S)/2 ∈ [0, 1] (0: the silhouette is the foreground), and the
+/// log-likelihood gains −w·e/(2γ²). The contour alone cannot tell a hand lying on the table's
+/// weak edges from one on the torso's strong ones; the foreground can.
 pub struct ShortContourPenalty<'a> {
     geometry: &'a actrack_render::ArmGeometry,
     likelihood: &'a LikelihoodModel,
@@ -459,6 +471,21 @@ pub struct ShortContourPenalty<'a> {
     settings: [f64; 2],
     /// Whether contours longer than n̄ use the sum form too.
     long: bool,
+    /// Weight and per-view foreground counts of the silhouette term.
+    silhouette: Option<(f64, Vec<&'a ForegroundCounts>)>,
+}
+
+/// The silhouette error of [`ShortContourPenalty`]: ((F − I)/F + (S − I)/S)/2, with an empty
+/// foreground or silhouette counting as a full miss of that half.
+pub fn silhouette_error(foreground: u64, overlap: Overlap) -> f64 {
+    let miss = |all: u64, hit: u64| {
+        if all == 0 {
+            1.0
+        } else {
+            (all - hit.min(all)) as f64 / all as f64
+        }
+    };
+    0.5 * (miss(foreground, overlap.foreground) + miss(overlap.area, overlap.foreground))
 }
 
 impl actrack_pf::ObservationModel for ShortContourPenalty<'_> {
@@ -487,6 +514,25 @@ impl actrack_pf::ObservationModel for ShortContourPenalty<'_> {
             let [weight, q] = self.settings;
             let at = ((lens.len() as f64 * q.clamp(0.0, 1.0)) as usize).min(lens.len().max(1) - 1);
             let reference = lens.get(at).copied().unwrap_or(0) as f64;
+            if let Some((w, counts)) = &self.silhouette
+                && let (Some(&counts), Some(cam)) =
+                    (counts.get(view), self.likelihood.cameras().get(view))
+            {
+                let total = counts.total();
+                let errors: Vec<f64> = poses
+                    .par_iter()
+                    .map(|p| {
+                        let world = self.scene.pose_to_world(p);
+                        let parts = actrack_render::project_parts(cam, self.geometry, &world);
+                        counts
+                            .overlap(&parts)
+                            .map_or(1.0, |o| silhouette_error(total, o))
+                    })
+                    .collect();
+                for (o, e) in out.iter_mut().zip(errors) {
+                    *o -= *w * e * factor;
+                }
+            }
             for (o, &(s, n)) in out.iter_mut().zip(&sums) {
                 let n = n as f64;
                 let eps = if n == 0.0 {
@@ -510,6 +556,8 @@ struct EdgeStage {
     local: actrack_render::LocalNormScratch,
     spec: EdgeImage,
     gate: GateScratch,
+    /// The gate's undilated foreground (with `Condition::silhouette`).
+    counts: ForegroundCounts,
 }
 
 impl EdgeStage {
@@ -537,6 +585,12 @@ impl EdgeStage {
         if let (Some(gate), Some(bg)) = (&cond.foreground_gate, background) {
             gate.apply(view, bg, &mut self.gate, out)
                 .map_err(|e| Error::Config(format!("frame {frame}: {e}")))?;
+            if cond.silhouette.is_some() {
+                let (w, h) = view.size();
+                self.counts
+                    .set(self.gate.foreground(), w, h, |x| x > 0.5)
+                    .map_err(|e| Error::Config(format!("frame {frame}: {e}")))?;
+            }
         }
         Ok(())
     }
@@ -693,7 +747,8 @@ impl ForegroundGate {
     }
 
     /// The foreground mask of `view` against `background` (0/1, dilated by
-    /// [`actrack_render::max_filter`]) into `mask`.
+    /// [`actrack_render::max_filter`]) into `mask`; the undilated one stays in `scratch`
+    /// ([`GateScratch::foreground`]).
     pub fn mask(
         &self,
         view: ImageView<'_>,
@@ -757,6 +812,13 @@ pub struct GateScratch {
     chan: Vec<f32>,
     max: actrack_render::LocalNormScratch,
     mask: Vec<f32>,
+}
+
+impl GateScratch {
+    /// The undilated foreground mask (0/1) of the last [`ForegroundGate::mask`].
+    pub fn foreground(&self) -> &[f32] {
+        &self.grey
+    }
 }
 
 /// What rendering and scoring a condition in a scene needs: the scene synthesis with the
@@ -859,6 +921,17 @@ pub fn run_video(
     if let Some(gate) = &cond.foreground_gate {
         gate.validate()?;
     }
+    if let Some(w) = cond.silhouette
+        && !(w.is_finite()
+            && w >= 0.0
+            && cond.foreground_gate.is_some()
+            && cond.short_contour_penalty.is_some())
+    {
+        return Err(Error::Config(format!(
+            "silhouette term: needs a foreground gate, the short-contour penalty and a weight \
+             ≥ 0, got {w}"
+        )));
+    }
     if background == Some(GateBackground::Median) {
         let mut chan = Vec::new();
         for (v, cam) in cams.iter().enumerate() {
@@ -928,6 +1001,9 @@ pub fn run_video(
                 tracker.step(&ShortContourPenalty {
                     settings,
                     long: cond.penalty_long,
+                    silhouette: cond
+                        .silhouette
+                        .map(|w| (w, workspaces.iter().map(|w| &w.counts).collect())),
                     geometry: &geometry,
                     likelihood: &likelihood,
                     scene,
@@ -1567,6 +1643,93 @@ mod tests {
         assert!(mono.body);
     }
 
+    /// The silhouette error's closed forms, and the silhouette term of the short-contour
+    /// penalty against pixel counting: with the foreground exactly the true pose's silhouette,
+    /// each pose's score drops by w·e/(2γ²), e counted pixel by pixel from `cover_parts`, and
+    /// only the true pose has e = 0.
+    #[test]
+    fn silhouette_term_against_pixel_counts() {
+        let o = |area, foreground| Overlap { area, foreground };
+        assert!(silhouette_error(100, o(100, 100)).abs() < 1e-12);
+        assert!((silhouette_error(100, o(50, 0)) - 1.0).abs() < 1e-12);
+        assert!((silhouette_error(100, o(50, 50)) - 0.25).abs() < 1e-12);
+        assert!((silhouette_error(100, o(200, 100)) - 0.25).abs() < 1e-12);
+        assert!((silhouette_error(0, o(0, 0)) - 1.0).abs() < 1e-12);
+        assert!((silhouette_error(100, o(0, 0)) - 1.0).abs() < 1e-12);
+
+        let scene = test_scene();
+        let cond = Condition::monocular("t");
+        let Rig {
+            synth,
+            geometry,
+            cams,
+            likelihood,
+        } = rig(&scene, &cond, [0.30, 0.46]).unwrap();
+        let img = synth
+            .render(&cams[0], &scene.pose_to_world(&POSES[1]), 3)
+            .unwrap();
+        let mut edges = vec![EdgeImage::default()];
+        EdgeWorkspace::new()
+            .compute_into(
+                ImageView::rgb8(&img.data, img.width, img.height).unwrap(),
+                &scene.edge_params(img.width),
+                &mut edges[0],
+            )
+            .unwrap();
+        let mut poses = POSES.to_vec();
+        for p in &mut poses {
+            actrack_render::correct_arm(&geometry, p, None);
+        }
+        let (w, h) = (img.width, img.height);
+        let cover = |pose: &[f64; 9]| {
+            let mut m = vec![0u8; (w * h) as usize];
+            let parts =
+                actrack_render::project_parts(&cams[0], &geometry, &scene.pose_to_world(pose));
+            actrack_render::cover_parts(&parts, 0.0, w, h, &mut m).unwrap();
+            m
+        };
+        let truth = cover(&poses[1]);
+        let mut counts = ForegroundCounts::default();
+        counts.set(&truth, w, h, |x| x == 1).unwrap();
+        let score = |silhouette| {
+            let pen = ShortContourPenalty {
+                geometry: &geometry,
+                likelihood: &likelihood,
+                scene: &scene,
+                edges: &edges,
+                settings: [1.0, 0.5],
+                long: false,
+                silhouette,
+            };
+            let mut out = vec![0.0; poses.len()];
+            actrack_pf::ObservationModel::log_likelihoods(&pen, &poses, &mut out);
+            out
+        };
+        let weight = 0.7;
+        let plain = score(None);
+        let with = score(Some((weight, vec![&counts])));
+        let factor = 1.0 / (2.0 * cond.gamma() * cond.gamma());
+        let ones = |m: &[u8]| m.iter().map(|&x| u32::from(x)).sum::<u32>();
+        let f = f64::from(ones(&truth));
+        for (i, pose) in poses.iter().enumerate() {
+            let m = cover(pose);
+            let s = f64::from(ones(&m));
+            let inter = m
+                .iter()
+                .zip(&truth)
+                .filter(|&(&a, &b)| a == 1 && b == 1)
+                .count() as f64;
+            let e = 0.5 * ((f - inter) / f + (s - inter) / s);
+            let got = (plain[i] - with[i]) / (weight * factor);
+            assert!((got - e).abs() < 1e-3, "pose {i}: {got} against {e}");
+            if i == 1 {
+                assert!(e < 1e-9);
+            } else {
+                assert!(e > 0.05, "pose {i}: {e}");
+            }
+        }
+    }
+
     /// The short-contour penalty equals SPEC's likelihood when no contour is shorter than the
     /// reference (q = 0: the shortest), and with the longest as reference (q = 1) lowers the
     /// score of exactly the poses with shorter contours.
@@ -1614,6 +1777,7 @@ mod tests {
                 edges: &edges,
                 settings,
                 long: false,
+                silhouette: None,
             };
             let mut out = vec![0.0; poses.len()];
             actrack_pf::ObservationModel::log_likelihoods(&pen, &poses, &mut out);

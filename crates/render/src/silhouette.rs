@@ -141,7 +141,7 @@ impl ForegroundCounts {
             row.sort_unstable();
             let prefix = &self.prefix[v * (self.width + 1)..(v + 1) * (self.width + 1)];
             let mut open: Option<(i64, i64)> = None;
-            let mut close = |(lo, hi): (i64, i64), out: &mut Overlap| {
+            let close = |(lo, hi): (i64, i64), out: &mut Overlap| {
                 out.area += (hi - lo + 1) as u64;
                 out.foreground += u64::from(prefix[hi as usize + 1] - prefix[lo as usize]);
             };
