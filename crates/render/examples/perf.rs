@@ -8,7 +8,7 @@
 //! The first argument selects a kernel (`all`, `edge640`, `edge1080`, `raster`, `analytic`), the
 //! second scales the number of repetitions (default 1; use a small count under
 //! `valgrind --tool=callgrind`, whose instruction counts are stable under load). The first line
-//! says whether the edge-image kernels run with AVX2 on this CPU (runtime dispatch).
+//! says whether the edge-image kernels run with AVX-512 or AVX2 on this CPU (runtime dispatch).
 
 use std::time::Instant;
 
@@ -50,12 +50,16 @@ fn camera(w: u32, h: u32) -> Camera {
 }
 
 fn main() {
-    // Whether the dispatched kernels (edge image) run with a wider instruction set than the
-    // baseline build on this CPU (x86-64: AVX2 = pulp's V3).
-    let simd = if matches!(pulp::Arch::new(), pulp::Arch::Scalar) {
-        "baseline"
-    } else {
-        "wide (x86-64: AVX2)"
+    // Which variant of the dispatched kernels (edge image) runs on this CPU (x86-64: pulp's V4 =
+    // AVX-512, V3 = AVX2, or the baseline build).
+    let simd = match pulp::Arch::new() {
+        pulp::Arch::Scalar => "baseline",
+        #[cfg(target_arch = "x86_64")]
+        pulp::Arch::V4(_) => "AVX-512",
+        #[cfg(target_arch = "x86_64")]
+        pulp::Arch::V3(_) => "AVX2",
+        #[allow(unreachable_patterns)]
+        _ => "wide",
     };
     println!("SIMD dispatch: {simd}");
     let mut args = std::env::args().skip(1);
@@ -98,6 +102,22 @@ fn main() {
             });
             println!(
                 "  without smoothing: min {:.3} ms, median {:.3} ms",
+                c / 1e6,
+                t / 1e6
+            );
+            // The same work on a grey frame (no colour conversion): what the RGB → grey step
+            // costs.
+            let grey: Vec<u8> = frame
+                .data
+                .chunks_exact(3)
+                .map(|px| ((u16::from(px[0]) + u16::from(px[1]) + u16::from(px[2])) / 3) as u8)
+                .collect();
+            let gv = actrack_render::ImageView::grey8(&grey, w, h).expect("grey view");
+            let (c, t) = time(41, 2, || {
+                std::hint::black_box(ws.compute(gv, &p0).expect("edges").data()[0]);
+            });
+            println!(
+                "  without smoothing, grey input: min {:.3} ms, median {:.3} ms",
                 c / 1e6,
                 t / 1e6
             );

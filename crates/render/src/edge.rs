@@ -180,6 +180,9 @@ const MAX_BANDS: usize = 128;
 struct Split {
     sobel_rows: usize,
     gauss_rows: usize,
+    /// Columns per strip of the Gaussian pass; `None`: [`strip_columns`] (the tests force
+    /// other widths).
+    strip: Option<usize>,
 }
 
 impl Split {
@@ -202,8 +205,24 @@ impl Split {
         Self {
             sobel_rows: rows(sobel),
             gauss_rows: rows(gauss),
+            strip: None,
         }
     }
+}
+
+/// Bytes of the ring of horizontally smoothed rows that the vertical Gaussian reads for every
+/// output row: small enough to stay in L1 (32–48 KiB on current x86-64 cores) beside the rows
+/// it writes.
+const RING_BYTES: usize = 24 * 1024;
+
+/// Columns per strip of the Gaussian pass for a `w`-wide image and kernel radius `r`: the
+/// widest equal strips (a multiple of 8 columns, at least 64) whose ring of 2r+1 rows fits in
+/// `RING_BYTES`. At 640 px and σ = 4 (r = 12, 25 rows) that is three strips of 216 columns
+/// (ring 21 KiB) instead of one 64 KiB ring, which would be read from L2.
+fn strip_columns(w: usize, r: usize) -> usize {
+    let widest = (RING_BYTES / ((2 * r + 1) * size_of::<f32>())).max(64);
+    let strips = w.div_ceil(widest).max(1);
+    w.div_ceil(strips).next_multiple_of(8).min(w)
 }
 
 /// Largest value of a slice (0 for an empty slice or all values ≤ 0); 8 lanes so that it
@@ -359,12 +378,12 @@ impl EdgeWorkspace {
         params.validate()?;
         let h = frame.size().1 as usize;
         let threads = rayon::current_num_threads().max(1);
-        // The kernels are compiled a second time with AVX2 (+ FMA, BMI, …) and the variant the
-        // CPU supports is chosen at run time (pulp; no `target-cpu` flag, so the binaries run on
-        // any x86-64); every band of every pass is one dispatched call. Every helper below is
-        // `#[inline(always)]` so that it is compiled inside the dispatched function. No FMA
-        // contraction happens (Rust never fuses `a * b + c`), so both variants give
-        // bit-identical G.
+        // The kernels are compiled twice more, with AVX2 (+ FMA, BMI, …) and with AVX-512
+        // (pulp's V3 and V4), and the best variant the CPU supports is chosen at run time (pulp;
+        // no `target-cpu` flag, so the binaries run on any x86-64); every band of every pass is
+        // one dispatched call. Every helper below is `#[inline(always)]` so that it is compiled
+        // inside the dispatched function. No FMA contraction happens (Rust never fuses
+        // `a * b + c`), so every variant gives bit-identical G.
         self.compute_split(
             &frame,
             params,
@@ -403,6 +422,10 @@ impl EdgeWorkspace {
         }
         let frame = *frame;
         let (kernel, slots) = (&self.kernel[..], &self.slots[..]);
+        let strip = split
+            .strip
+            .unwrap_or_else(|| strip_columns(w, kernel.len().saturating_sub(1)))
+            .clamp(1, w);
         let (sigma, tau, binary) = (params.sigma, params.tau, params.binary);
         // Every band behind its own lock: written by the one worker that claims it, read by
         // the next pass (the Gaussian reads its neighbours' magnitudes too).
@@ -460,6 +483,7 @@ impl EdgeWorkspace {
                                 slots,
                                 w,
                                 h,
+                                strip,
                                 y0,
                                 out: &mut o,
                                 thr,
@@ -652,7 +676,9 @@ impl pulp::WithSimd for SobelBand<'_, '_> {
 /// Threshold + separable Gaussian `mag → out` for the band's rows `y0 …` (`out` holds the
 /// band's rows), borders clamped; returns max(out). The horizontal pass writes into a ring of
 /// 2r+1 rows that the vertical pass reads, so the intermediate image never leaves the cache;
-/// the r rows above and below the band are smoothed horizontally by this band as well.
+/// the r rows above and below the band are smoothed horizontally by this band as well. The band
+/// is processed in column strips of `strip` columns (each with its r-column halo), so that the
+/// ring stays in L1 also for wide images.
 struct GaussBand<'a> {
     s: &'a mut WorkerScratch,
     mag: BandRows<'a>,
@@ -660,6 +686,8 @@ struct GaussBand<'a> {
     slots: &'a [u32],
     w: usize,
     h: usize,
+    /// Columns per strip ([`strip_columns`]).
+    strip: usize,
     y0: usize,
     out: &'a mut [f32],
     thr: Threshold,
@@ -679,37 +707,52 @@ impl pulp::WithSimd for GaussBand<'_> {
             slots,
             w,
             h,
+            strip,
             y0,
             out,
             thr,
         } = self;
         let r = k.len() - 1;
         let ring = 2 * r + 1;
-        s.tmp.resize(ring * w, 0.0);
-        s.pad.resize(w + 2 * r, 0.0);
-        // Row `yy` lives in ring slot `yy mod ring`.
-        let mut next = y0.saturating_sub(r);
-        let mut slot = next % ring;
+        let rows = out.len() / w;
+        s.tmp.resize(ring * strip, 0.0);
+        s.pad.resize(strip + 2 * r, 0.0);
         let mut lanes = [0f32; 8];
-        for y in y0..y0 + out.len() / w {
-            while next <= (y + r).min(h - 1) {
-                let src = mag.row(next);
-                let pad = &mut s.pad[..];
-                for (p, &g) in pad[r..r + w].iter_mut().zip(src) {
-                    *p = thr.apply(g);
+        // Strip by strip, so that the ring the vertical pass reads stays in L1. Every value is
+        // computed by the same operations as with one strip of the whole width.
+        let mut x0 = 0;
+        while x0 < w {
+            let sw = strip.min(w - x0);
+            // The strip's padded columns x0 − r … x0 + sw + r − 1, clamped to the image: the
+            // part inside the image and the copies of the border columns on either side.
+            let lo = x0.saturating_sub(r);
+            let hi = (x0 + sw + r).min(w);
+            let (left, right) = (lo + r - x0, x0 + sw + r - hi);
+            // Row `yy` lives in ring slot `yy mod ring`.
+            let mut next = y0.saturating_sub(r);
+            let mut slot = next % ring;
+            for y in y0..y0 + rows {
+                while next <= (y + r).min(h - 1) {
+                    let src = &mag.row(next)[lo..hi];
+                    let pad = &mut s.pad[..sw + 2 * r];
+                    for (p, &g) in pad[left..left + src.len()].iter_mut().zip(src) {
+                        *p = thr.apply(g);
+                    }
+                    let (first, last) = (pad[left], pad[left + src.len() - 1]);
+                    pad[..left].fill(first);
+                    pad[left + src.len()..].fill(last);
+                    debug_assert_eq!(left + src.len() + right, sw + 2 * r);
+                    gauss_row(pad, k, &mut s.tmp[slot * sw..][..sw]);
+                    next += 1;
+                    // The slot of row `next`, tracked without a division.
+                    slot = if slot + 1 == ring { 0 } else { slot + 1 };
                 }
-                let (first, last) = (pad[r], pad[r + w - 1]);
-                pad[..r].fill(first);
-                pad[r + w..].fill(last);
-                gauss_row(&s.pad, k, &mut s.tmp[slot * w..][..w]);
-                next += 1;
-                // The slot of row `next`, tracked without a division.
-                slot = if slot + 1 == ring { 0 } else { slot + 1 };
+                let dst = &mut out[(y - y0) * w + x0..][..sw];
+                gauss_col(&s.tmp, &slots[y * ring..][..ring], k, dst);
+                let m = max_value(dst);
+                lanes[y % 8] = if m > lanes[y % 8] { m } else { lanes[y % 8] };
             }
-            let dst = &mut out[(y - y0) * w..][..w];
-            gauss_col(&s.tmp, &slots[y * ring..][..ring], k, dst);
-            let m = max_value(dst);
-            lanes[y % 8] = if m > lanes[y % 8] { m } else { lanes[y % 8] };
+            x0 += sw;
         }
         max_value(&lanes)
     }
@@ -1072,7 +1115,7 @@ mod tests {
         ]
     }
 
-    /// The variant chosen at run time (AVX2 on most x86-64 machines) gives the same G, bit for
+    /// The variant chosen at run time (AVX2 or AVX-512 on most x86-64 machines) gives the same G, bit for
     /// bit, as the baseline (SSE2) build of the same kernels.
     #[test]
     fn dispatched_equals_baseline() {
@@ -1170,6 +1213,51 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// The Gaussian pass split into column strips of any width (one column, narrower than the
+    /// kernel's radius, not dividing the width, the whole width) gives the same G, bit for bit,
+    /// as the automatic width, in both instruction-set variants; the automatic width is a
+    /// multiple of 8 whose ring fits in `RING_BYTES`.
+    #[test]
+    fn column_strips_give_identical_g() {
+        for &(w, h) in &[(45usize, 37usize), (131, 20), (2, 3), (300, 9)] {
+            let rgb = test_frame(w, h);
+            let frame = ImageView::rgb8(&rgb, w as u32, h as u32).unwrap();
+            for p in &variant_params() {
+                let mut auto = EdgeWorkspace::new();
+                auto.compute_banded(&frame, p, 1, Isa::Dispatch(pulp::Arch::new()));
+                let mut ws = EdgeWorkspace::new();
+                for strip in [1, 3, 8, 17, 64, w - 1, w, w + 9] {
+                    for isa in [Isa::Dispatch(pulp::Arch::new()), Isa::Scalar] {
+                        let split = Split {
+                            strip: Some(strip.max(1)),
+                            ..Split::forced(h, 2, 2)
+                        };
+                        ws.compute_split(&frame, p, split, 1, isa);
+                        assert_eq!(ws.out, auto.out, "{w}×{h} {p:?}, strips of {strip}");
+                    }
+                }
+            }
+        }
+        for (w, r) in [
+            (640, 12),
+            (1920, 12),
+            (640, 3),
+            (100, 12),
+            (7, 1),
+            (640, 300),
+        ] {
+            let sw = strip_columns(w, r);
+            assert!(sw >= 1 && sw <= w, "{w} {r}: {sw}");
+            assert!(sw == w || sw.is_multiple_of(8), "{w} {r}: {sw}");
+            // At least 64 columns: a wider kernel's ring may exceed the budget.
+            assert!(sw >= 64.min(w), "{w} {r}: {sw}");
+            if sw < w && (2 * r + 1) * 64 * 4 <= RING_BYTES {
+                assert!((2 * r + 1) * sw * 4 <= RING_BYTES, "{w} {r}: {sw}");
+            }
+        }
+        assert_eq!(strip_columns(640, 12), 216);
     }
 
     #[test]
