@@ -1115,8 +1115,8 @@ mod tests {
         ]
     }
 
-    /// The variant chosen at run time (AVX2 or AVX-512 on most x86-64 machines) gives the same G, bit for
-    /// bit, as the baseline (SSE2) build of the same kernels.
+    /// The variant chosen at run time (AVX2 or AVX-512 on most x86-64 machines) gives the same
+    /// G, bit for bit, as the baseline (SSE2) build of the same kernels.
     #[test]
     fn dispatched_equals_baseline() {
         for &(w, h) in &[(45usize, 37usize), (67, 9), (2, 3)] {
