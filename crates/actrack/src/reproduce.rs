@@ -498,15 +498,27 @@ impl actrack_pf::ObservationModel for ShortContourPenalty<'_> {
         let factor = 1.0 / (2.0 * gamma * gamma);
         out.fill(0.0);
         for (view, edge) in self.edges.iter().enumerate() {
-            let sums: Vec<(f64, usize)> = poses
+            // The view's silhouette term, if any: weight, foreground counts and camera.
+            let silhouette = self.silhouette.as_ref().and_then(|(w, counts)| {
+                Some((*w, *counts.get(view)?, self.likelihood.cameras().get(view)?))
+            });
+            // Per pose: the contour's Σ (1 − G)² and length, and the silhouette error.
+            let sums: Vec<(f64, usize, f64)> = poses
                 .par_iter()
                 .map_init(actrack_render::RenderScratch::new, |scratch, p| {
                     let world = self.scene.pose_to_world(p);
-                    if world.iter().all(|x| x.is_finite()) {
+                    let (s, n) = if world.iter().all(|x| x.is_finite()) {
                         self.likelihood.view_sum(view, edge, &world, scratch)
                     } else {
                         (0.0, 0)
-                    }
+                    };
+                    let e = silhouette.map_or(0.0, |(_, counts, cam)| {
+                        let parts = actrack_render::project_parts(cam, self.geometry, &world);
+                        counts
+                            .overlap(&parts)
+                            .map_or(1.0, |o| silhouette_error(counts.total(), o))
+                    });
+                    (s, n, e)
                 })
                 .collect();
             let mut lens: Vec<usize> = sums.iter().map(|x| x.1).filter(|&n| n > 0).collect();
@@ -514,26 +526,10 @@ impl actrack_pf::ObservationModel for ShortContourPenalty<'_> {
             let [weight, q] = self.settings;
             let at = ((lens.len() as f64 * q.clamp(0.0, 1.0)) as usize).min(lens.len().max(1) - 1);
             let reference = lens.get(at).copied().unwrap_or(0) as f64;
-            if let Some((w, counts)) = &self.silhouette
-                && let (Some(&counts), Some(cam)) =
-                    (counts.get(view), self.likelihood.cameras().get(view))
-            {
-                let total = counts.total();
-                let errors: Vec<f64> = poses
-                    .par_iter()
-                    .map(|p| {
-                        let world = self.scene.pose_to_world(p);
-                        let parts = actrack_render::project_parts(cam, self.geometry, &world);
-                        counts
-                            .overlap(&parts)
-                            .map_or(1.0, |o| silhouette_error(total, o))
-                    })
-                    .collect();
-                for (o, e) in out.iter_mut().zip(errors) {
-                    *o -= *w * e * factor;
+            for (o, &(s, n, e)) in out.iter_mut().zip(&sums) {
+                if let Some((w, ..)) = silhouette {
+                    *o -= w * e * factor;
                 }
-            }
-            for (o, &(s, n)) in out.iter_mut().zip(&sums) {
                 let n = n as f64;
                 let eps = if n == 0.0 {
                     1.0
@@ -1643,6 +1639,33 @@ mod tests {
         assert!(mono.body);
     }
 
+    /// What the short-contour penalty's tests score: the rig of `cond`, the edge image of a
+    /// rendered frame of `POSES[1]` (camera 0), the corrected `POSES` and the frame's size.
+    fn penalty_fixture(
+        scene: &Scene,
+        cond: &Condition,
+        lengths: [f64; 2],
+    ) -> (Rig, Vec<EdgeImage>, Vec<[f64; 9]>, (u32, u32)) {
+        let rig = rig(scene, cond, lengths).unwrap();
+        let img = rig
+            .synth
+            .render(&rig.cams[0], &scene.pose_to_world(&POSES[1]), 3)
+            .unwrap();
+        let mut edges = vec![EdgeImage::default()];
+        EdgeWorkspace::new()
+            .compute_into(
+                ImageView::rgb8(&img.data, img.width, img.height).unwrap(),
+                &scene.edge_params(img.width),
+                &mut edges[0],
+            )
+            .unwrap();
+        let mut poses = POSES.to_vec();
+        for p in &mut poses {
+            actrack_render::correct_arm(&rig.geometry, p, None);
+        }
+        (rig, edges, poses, (img.width, img.height))
+    }
+
     /// The silhouette error's closed forms, and the silhouette term of the short-contour
     /// penalty against pixel counting: with the foreground exactly the true pose's silhouette,
     /// each pose's score drops by w·e/(2γ²), e counted pixel by pixel from `cover_parts`, and
@@ -1659,28 +1682,17 @@ mod tests {
 
         let scene = test_scene();
         let cond = Condition::monocular("t");
-        let Rig {
-            synth,
-            geometry,
-            cams,
-            likelihood,
-        } = rig(&scene, &cond, [0.30, 0.46]).unwrap();
-        let img = synth
-            .render(&cams[0], &scene.pose_to_world(&POSES[1]), 3)
-            .unwrap();
-        let mut edges = vec![EdgeImage::default()];
-        EdgeWorkspace::new()
-            .compute_into(
-                ImageView::rgb8(&img.data, img.width, img.height).unwrap(),
-                &scene.edge_params(img.width),
-                &mut edges[0],
-            )
-            .unwrap();
-        let mut poses = POSES.to_vec();
-        for p in &mut poses {
-            actrack_render::correct_arm(&geometry, p, None);
-        }
-        let (w, h) = (img.width, img.height);
+        let (
+            Rig {
+                geometry,
+                cams,
+                likelihood,
+                ..
+            },
+            edges,
+            poses,
+            (w, h),
+        ) = penalty_fixture(&scene, &cond, [0.30, 0.46]);
         let cover = |pose: &[f64; 9]| {
             let mut m = vec![0u8; (w * h) as usize];
             let parts =
@@ -1738,27 +1750,17 @@ mod tests {
         let scene = test_scene();
         let lengths = [0.30, 0.46];
         let cond = Condition::monocular("t");
-        let Rig {
-            synth,
-            geometry,
-            cams,
-            likelihood,
-        } = rig(&scene, &cond, lengths).unwrap();
-        let img = synth
-            .render(&cams[0], &scene.pose_to_world(&POSES[1]), 3)
-            .unwrap();
-        let mut edges = vec![EdgeImage::default()];
-        EdgeWorkspace::new()
-            .compute_into(
-                ImageView::rgb8(&img.data, img.width, img.height).unwrap(),
-                &scene.edge_params(img.width),
-                &mut edges[0],
-            )
-            .unwrap();
-        let mut poses = POSES.to_vec();
-        for p in &mut poses {
-            actrack_render::correct_arm(&geometry, p, None);
-        }
+        let (
+            Rig {
+                geometry,
+                cams,
+                likelihood,
+                ..
+            },
+            edges,
+            poses,
+            _,
+        ) = penalty_fixture(&scene, &cond, lengths);
         let spec = SceneObservation::new(&scene, &geometry, &likelihood, &edges);
         let mut want = vec![0.0; poses.len()];
         actrack_pf::ObservationModel::log_likelihoods(&spec, &poses, &mut want);
