@@ -129,12 +129,19 @@ impl ActionModel {
         self.actions.iter().map(|a| a.name.as_str()).collect()
     }
 
-    /// The actions' PHMMs for tracking, in order: as trained, or with every self-transition
-    /// capped at `max_stay` ([`Phmm::with_max_self_transition`]). Errors: a cap outside (0, 1].
-    pub fn tracking_phmms(&self, max_stay: Option<f64>) -> Result<Vec<Phmm>> {
+    /// The actions' PHMMs for tracking, in order: as trained, or with the self-transitions
+    /// capped at `max_stay` ([`Phmm::with_max_self_transition`]), those of every state or, with
+    /// `keep_last_dwell`, of every state but the last
+    /// ([`Phmm::with_max_self_transition_before_last`]). Errors: a cap outside (0, 1].
+    pub fn tracking_phmms(
+        &self,
+        max_stay: Option<f64>,
+        keep_last_dwell: bool,
+    ) -> Result<Vec<Phmm>> {
         self.actions
             .iter()
             .map(|a| match max_stay {
+                Some(p) if keep_last_dwell => a.phmm.with_max_self_transition_before_last(p),
                 Some(p) => a.phmm.with_max_self_transition(p),
                 None => Ok(a.phmm.clone()),
             })

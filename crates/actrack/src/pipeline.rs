@@ -147,6 +147,10 @@ pub struct TrackOptions {
     /// Cap of every model state's self-transition probability
     /// (`Phmm::with_max_self_transition`; not in the paper); `None`: the models' dwell times.
     pub max_stay: Option<f64>,
+    /// With `max_stay`: each model's last state keeps its trained dwell
+    /// (`Phmm::with_max_self_transition_before_last`), so that an action's particles stay in it
+    /// while the arm rests after the action.
+    pub keep_last_dwell: bool,
 }
 
 impl Default for TrackOptions {
@@ -158,6 +162,7 @@ impl Default for TrackOptions {
             theta_prior: ThetaPrior::Training,
             speed_range: None,
             max_stay: None,
+            keep_last_dwell: false,
         }
     }
 }
@@ -315,7 +320,7 @@ impl Pipeline {
             .build()
             .map_err(|e| Error::Config(format!("tracker: {e}")))?;
         let names: Vec<String> = model.actions.iter().map(|a| a.name.clone()).collect();
-        let phmms = model.tracking_phmms(opts.max_stay)?;
+        let phmms = model.tracking_phmms(opts.max_stay, opts.keep_last_dwell)?;
         let tracker =
             Tracker::new(phmms.iter(), names.clone(), config).map_err(|e| Error::Model {
                 context: "building the tracker".into(),
@@ -778,17 +783,19 @@ mod tests {
     }
 
     /// `max_stay = 1` is the models' own dwell times (the same track bit for bit), a cap below
-    /// the models' self-transitions changes the track, and a cap outside (0, 1] is an error.
+    /// the models' self-transitions changes the track, so does keeping the last states' dwells
+    /// under it, and a cap outside (0, 1] is an error.
     #[test]
     #[allow(clippy::float_cmp)] // bit-identical estimates are the claim
     fn max_stay_caps_the_dwell_times() {
         let prep = small(6, 5);
         let frames = first_view_frames(&prep);
-        let run = |max_stay: Option<f64>| {
+        let run = |max_stay: Option<f64>, keep_last_dwell: bool| {
             let track = TrackOptions {
                 particles: 60,
                 seed: 5,
                 max_stay,
+                keep_last_dwell,
                 ..TrackOptions::default()
             };
             let mut p = Pipeline::new(&prep.model, &prep.scene, &track).unwrap();
@@ -798,9 +805,17 @@ mod tests {
                 .map(|(t, f)| p.step(t, &[f]).unwrap().estimate.best_pose)
                 .collect::<Vec<_>>()
         };
-        let base = run(None);
-        assert_eq!(run(Some(1.0)), base);
-        assert_ne!(run(Some(0.3)), base);
+        let base = run(None, false);
+        assert_eq!(run(Some(1.0), false), base);
+        assert_eq!(run(None, true), base, "no cap: the flag changes nothing");
+        let capped = run(Some(0.3), false);
+        assert_ne!(capped, base);
+        // The last states' trained dwells are above 0.3, so keeping them changes the track.
+        assert!(prep.model.actions.iter().all(|a| {
+            let n = a.phmm.n_states();
+            a.phmm.transition(n - 1, n - 1) > 0.3
+        }));
+        assert_ne!(run(Some(0.3), true), capped);
         for bad in [0.0, 1.5, f64::NAN] {
             let track = TrackOptions {
                 max_stay: Some(bad),

@@ -294,6 +294,9 @@ pub struct Condition {
     /// ([`actrack_phmm::Phmm::with_max_self_transition`]; not in the paper); `None`: the
     /// models' own dwell times.
     pub max_stay: Option<f64>,
+    /// With `max_stay`: the last state of each model keeps its trained dwell
+    /// ([`actrack_phmm::Phmm::with_max_self_transition_before_last`]).
+    pub keep_last_dwell: bool,
     /// With `short_contour_penalty`: contours longer than n̄ are scored by the same sum form
     /// (they gain for each point below λ) instead of SPEC's mean.
     pub penalty_long: bool,
@@ -334,6 +337,7 @@ impl Condition {
             short_contour_penalty: None,
             local_norm: None,
             max_stay: None,
+            keep_last_dwell: false,
             penalty_long: false,
             pose_sampling: PoseSampling::Gaussian { samples: 1 },
             median_window: 5,
@@ -895,7 +899,7 @@ pub fn run_video(
         synth.body = None;
     }
     let names: Vec<String> = model.actions.iter().map(|a| a.name.clone()).collect();
-    let phmms = model.tracking_phmms(cond.max_stay)?;
+    let phmms = model.tracking_phmms(cond.max_stay, cond.keep_last_dwell)?;
     let mut tracker = Tracker::new(phmms.iter(), names.clone(), tracker_config(model, cond)?)
         .map_err(|e| Error::Model {
             context: "building the tracker".into(),

@@ -297,6 +297,16 @@ fn bad_input_names_the_frame_with_exit_code_2() {
             &["--max-stay"],
         );
     }
+    // Keeping the last state's dwell needs a cap.
+    expect_input_error(
+        &track(
+            &f.root,
+            "video/frames",
+            &["--csv", "x.csv", "--keep-last-dwell"],
+            None,
+        ),
+        &["--keep-last-dwell", "--max-stay"],
+    );
     // Empty directory.
     std::fs::create_dir_all(f.root.join("empty")).unwrap();
     expect_input_error(

@@ -594,6 +594,19 @@ impl Phmm {
     /// state the pooled, long geometric dwell, which a faster subject's track cannot leave in
     /// time. Errors: `max_stay` not in (0, 1].
     pub fn with_max_self_transition(&self, max_stay: f64) -> Result<Phmm, PhmmError> {
+        self.cap_self_transitions(max_stay, self.n)
+    }
+
+    /// [`Phmm::with_max_self_transition`] for every state but the last, which keeps its
+    /// trained dwell: the cap lets a track pass the pauses inside an action in time, while the
+    /// final state, where the demonstrations end at rest, still holds the action until the
+    /// motion that follows. Errors: `max_stay` not in (0, 1].
+    pub fn with_max_self_transition_before_last(&self, max_stay: f64) -> Result<Phmm, PhmmError> {
+        self.cap_self_transitions(max_stay, self.n.saturating_sub(1))
+    }
+
+    /// Caps the self-transitions of states `0..n_capped` (see [`Phmm::with_max_self_transition`]).
+    fn cap_self_transitions(&self, max_stay: f64, n_capped: usize) -> Result<Phmm, PhmmError> {
         if !(max_stay > 0.0 && max_stay <= 1.0) {
             return Err(PhmmError::InvalidParameter {
                 name: "max_stay",
@@ -603,7 +616,7 @@ impl Phmm {
         let w = self.j + 1;
         let mut trans = self.trans.clone();
         let mut exit = self.exit.clone();
-        for i in 0..self.n {
+        for i in 0..n_capped {
             let stay = trans[i * w];
             let leave: f64 = trans[i * w + 1..(i + 1) * w].iter().sum::<f64>() + exit[i];
             if stay > max_stay && leave > 0.0 {

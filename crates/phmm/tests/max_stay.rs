@@ -88,3 +88,24 @@ fn bad_caps_are_errors() {
         );
     }
 }
+
+#[test]
+fn the_last_state_can_keep_its_dwell() {
+    let m = model();
+    let c = m.with_max_self_transition_before_last(0.92).unwrap();
+    // State 1 is capped as before; the last state keeps 0.95 and its exit 0.05, bit for bit.
+    assert!((c.transition(1, 1) - 0.92).abs() < 1e-15);
+    assert!((c.transition(1, 2) - 0.06).abs() < 1e-12);
+    assert_eq!(c.transition(3, 3), m.transition(3, 3));
+    assert_eq!(c.exit_prob(3), m.exit_prob(3));
+    let all = m.with_max_self_transition(0.92).unwrap();
+    for i in 0..3 {
+        for j in 0..4 {
+            assert_eq!(c.transition(i, j), all.transition(i, j), "({i}, {j})");
+        }
+    }
+    assert!(matches!(
+        m.with_max_self_transition_before_last(f64::NAN),
+        Err(PhmmError::InvalidParameter { .. })
+    ));
+}

@@ -83,6 +83,11 @@ pub struct Args {
     /// the demonstrations did (a drink held at the mouth). Default: the models' dwell times.
     #[arg(long, value_name = "P", value_parser = parse_max_stay)]
     pub max_stay: Option<f64>,
+    /// With `--max-stay`: leave each model's last state uncapped, so that the action holds while
+    /// the arm rests after it (the demonstrations end at rest; capping that state makes a
+    /// finished drink look like the start of a reach).
+    #[arg(long, requires = "max_stay")]
+    pub keep_last_dwell: bool,
 }
 
 /// `--max-stay P`: 0 < P ≤ 1.
@@ -171,6 +176,7 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
         },
         speed_range: args.speed_range,
         max_stay: args.max_stay,
+        keep_last_dwell: args.keep_last_dwell,
     };
     let outputs = TrackOutputs {
         mcap: args.output.clone(),
