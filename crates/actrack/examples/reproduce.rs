@@ -20,7 +20,7 @@ use std::time::Instant;
 
 use actrack::manifest::Manifest;
 use actrack::mocap::ArmSide;
-use actrack::model::ActionModel;
+use actrack::model::{ActionModel, DwellCap};
 use actrack::pipeline::ContourMethod;
 use actrack::reproduce::{
     Condition, ConditionResult, TestTrial, VideoRun, back_to_back, run_condition, run_video,
@@ -603,7 +603,7 @@ fn capped_penalty(seed: u64) -> Condition {
     Condition {
         seed,
         short_contour_penalty: Some([1.0, 0.5]),
-        max_stay: Some(actrack::reproduce::MAX_STAY),
+        dwell_cap: Some(DwellCap::all(actrack::reproduce::MAX_STAY)),
         ..Condition::monocular(&if seed == 9 {
             name.to_string()
         } else {
@@ -631,7 +631,10 @@ fn headline(seed: u64) -> Condition {
         foreground_gate: Some(actrack::reproduce::RUNNING_GATE),
         particles: 1600,
         contour: ContourMethod::Analytic,
-        keep_last_dwell: true,
+        dwell_cap: Some(DwellCap {
+            max_stay: actrack::reproduce::MAX_STAY,
+            keep_last: true,
+        }),
         ..capped_penalty(seed)
     };
     if seed == 9 {
@@ -945,8 +948,13 @@ fn main() -> Res<()> {
                 .or(c.local_norm),
             penalty_long: a.penalty_long || c.penalty_long,
             seed: a.seed.unwrap_or(c.seed),
-            max_stay: a.max_stay.or(c.max_stay),
-            keep_last_dwell: a.keep_last_dwell || c.keep_last_dwell,
+            dwell_cap: a
+                .max_stay
+                .or(c.dwell_cap.map(|d| d.max_stay))
+                .map(|max_stay| DwellCap {
+                    max_stay,
+                    keep_last: a.keep_last_dwell || c.dwell_cap.is_some_and(|d| d.keep_last),
+                }),
             pose_sampling: a.pose_sampling.unwrap_or(c.pose_sampling),
             median_window: a.median_window.unwrap_or(c.median_window),
             phase_jump: a.phase_jump.or(c.phase_jump),

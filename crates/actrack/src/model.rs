@@ -123,6 +123,29 @@ struct FileIn {
     model: ActionModel,
 }
 
+/// A cap on the models' self-transition probabilities at tracking time (not in the paper;
+/// `track --max-stay P [--keep-last-dwell]`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct DwellCap {
+    /// The largest self-transition probability, in (0, 1]
+    /// ([`Phmm::with_max_self_transition`]).
+    pub max_stay: f64,
+    /// Leave each model's last state uncapped
+    /// ([`Phmm::with_max_self_transition_before_last`]), so that a finished action's particles
+    /// stay in it while the arm rests after the action.
+    pub keep_last: bool,
+}
+
+impl DwellCap {
+    /// Every state capped at `max_stay`.
+    pub fn all(max_stay: f64) -> Self {
+        Self {
+            max_stay,
+            keep_last: false,
+        }
+    }
+}
+
 impl ActionModel {
     /// The action names in order.
     pub fn action_names(&self) -> Vec<&str> {
@@ -130,19 +153,13 @@ impl ActionModel {
     }
 
     /// The actions' PHMMs for tracking, in order: as trained, or with the self-transitions
-    /// capped at `max_stay` ([`Phmm::with_max_self_transition`]), those of every state or, with
-    /// `keep_last_dwell`, of every state but the last
-    /// ([`Phmm::with_max_self_transition_before_last`]). Errors: a cap outside (0, 1].
-    pub fn tracking_phmms(
-        &self,
-        max_stay: Option<f64>,
-        keep_last_dwell: bool,
-    ) -> Result<Vec<Phmm>> {
+    /// capped by `cap` ([`DwellCap`]). Errors: a cap outside (0, 1].
+    pub fn tracking_phmms(&self, cap: Option<DwellCap>) -> Result<Vec<Phmm>> {
         self.actions
             .iter()
-            .map(|a| match max_stay {
-                Some(p) if keep_last_dwell => a.phmm.with_max_self_transition_before_last(p),
-                Some(p) => a.phmm.with_max_self_transition(p),
+            .map(|a| match cap {
+                Some(c) if c.keep_last => a.phmm.with_max_self_transition_before_last(c.max_stay),
+                Some(c) => a.phmm.with_max_self_transition(c.max_stay),
                 None => Ok(a.phmm.clone()),
             })
             .collect::<std::result::Result<Vec<_>, _>>()

@@ -25,7 +25,7 @@ use nalgebra::Vector3;
 use crate::error::{Error, Result};
 use crate::frames::{Frame, FrameSource};
 use crate::mcap_out::{EstimateMsg, FrameRecord, TrackWriter};
-use crate::model::ActionModel;
+use crate::model::{ActionModel, DwellCap};
 use crate::scene::{Camera, Scene};
 use crate::track_csv::{TrajRow, Trajectory};
 
@@ -144,13 +144,9 @@ pub struct TrackOptions {
     /// Per-particle speed range (`TrackerConfigBuilder::speed_range`); `None`: the models'
     /// timing.
     pub speed_range: Option<[f64; 2]>,
-    /// Cap of every model state's self-transition probability
-    /// (`Phmm::with_max_self_transition`; not in the paper); `None`: the models' dwell times.
-    pub max_stay: Option<f64>,
-    /// With `max_stay`: each model's last state keeps its trained dwell
-    /// (`Phmm::with_max_self_transition_before_last`), so that an action's particles stay in it
-    /// while the arm rests after the action.
-    pub keep_last_dwell: bool,
+    /// Cap of the model states' self-transition probabilities ([`DwellCap`]; not in the
+    /// paper); `None`: the models' dwell times.
+    pub dwell_cap: Option<DwellCap>,
 }
 
 impl Default for TrackOptions {
@@ -161,8 +157,7 @@ impl Default for TrackOptions {
             contour: ContourMethod::Raster,
             theta_prior: ThetaPrior::Training,
             speed_range: None,
-            max_stay: None,
-            keep_last_dwell: false,
+            dwell_cap: None,
         }
     }
 }
@@ -320,7 +315,7 @@ impl Pipeline {
             .build()
             .map_err(|e| Error::Config(format!("tracker: {e}")))?;
         let names: Vec<String> = model.actions.iter().map(|a| a.name.clone()).collect();
-        let phmms = model.tracking_phmms(opts.max_stay, opts.keep_last_dwell)?;
+        let phmms = model.tracking_phmms(opts.dwell_cap)?;
         let tracker =
             Tracker::new(phmms.iter(), names.clone(), config).map_err(|e| Error::Model {
                 context: "building the tracker".into(),
@@ -794,8 +789,10 @@ mod tests {
             let track = TrackOptions {
                 particles: 60,
                 seed: 5,
-                max_stay,
-                keep_last_dwell,
+                dwell_cap: max_stay.map(|max_stay| DwellCap {
+                    max_stay,
+                    keep_last: keep_last_dwell,
+                }),
                 ..TrackOptions::default()
             };
             let mut p = Pipeline::new(&prep.model, &prep.scene, &track).unwrap();
@@ -818,7 +815,7 @@ mod tests {
         assert_ne!(run(Some(0.3), true), capped);
         for bad in [0.0, 1.5, f64::NAN] {
             let track = TrackOptions {
-                max_stay: Some(bad),
+                dwell_cap: Some(DwellCap::all(bad)),
                 ..TrackOptions::default()
             };
             let e = Pipeline::new(&prep.model, &prep.scene, &track)

@@ -31,7 +31,7 @@ use crate::eval::{ErrorStats, EvalReport, evaluate};
 use crate::manifest::Manifest;
 use crate::mocap::ArmSide;
 use crate::mocap::trial::{Importer, median};
-use crate::model::ActionModel;
+use crate::model::{ActionModel, DwellCap};
 use crate::pipeline::{
     FrameResult, GAMMA, SceneObservation, draw_overlay, render_arm, render_camera, track_row,
     training_theta_regions,
@@ -290,13 +290,9 @@ pub struct Condition {
     /// Divide each view's G by its local maximum ([`actrack_render::LocalNorm`]; an extension,
     /// not SPEC §4.1); `None`: SPEC's G.
     pub local_norm: Option<actrack_render::LocalNorm>,
-    /// Cap every self-transition of the models at this probability
-    /// ([`actrack_phmm::Phmm::with_max_self_transition`]; not in the paper); `None`: the
-    /// models' own dwell times.
-    pub max_stay: Option<f64>,
-    /// With `max_stay`: the last state of each model keeps its trained dwell
-    /// ([`actrack_phmm::Phmm::with_max_self_transition_before_last`]).
-    pub keep_last_dwell: bool,
+    /// Cap the models' self-transitions ([`DwellCap`]; not in the paper); `None`: the models'
+    /// own dwell times.
+    pub dwell_cap: Option<DwellCap>,
     /// With `short_contour_penalty`: contours longer than n̄ are scored by the same sum form
     /// (they gain for each point below λ) instead of SPEC's mean.
     pub penalty_long: bool,
@@ -336,8 +332,7 @@ impl Condition {
             body: true,
             short_contour_penalty: None,
             local_norm: None,
-            max_stay: None,
-            keep_last_dwell: false,
+            dwell_cap: None,
             penalty_long: false,
             pose_sampling: PoseSampling::Gaussian { samples: 1 },
             median_window: 5,
@@ -899,7 +894,7 @@ pub fn run_video(
         synth.body = None;
     }
     let names: Vec<String> = model.actions.iter().map(|a| a.name.clone()).collect();
-    let phmms = model.tracking_phmms(cond.max_stay, cond.keep_last_dwell)?;
+    let phmms = model.tracking_phmms(cond.dwell_cap)?;
     let mut tracker = Tracker::new(phmms.iter(), names.clone(), tracker_config(model, cond)?)
         .map_err(|e| Error::Model {
             context: "building the tracker".into(),

@@ -5,7 +5,7 @@ use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use actrack::frames::{FrameOptions, FrameSource};
-use actrack::model::ActionModel;
+use actrack::model::{ActionModel, DwellCap};
 use actrack::pipeline::{ContourMethod, ThetaPrior, TrackOptions, TrackOutputs, track};
 use actrack::scene::Scene;
 
@@ -175,8 +175,10 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
             ThetaPriorArg::Scene => ThetaPrior::Scene,
         },
         speed_range: args.speed_range,
-        max_stay: args.max_stay,
-        keep_last_dwell: args.keep_last_dwell,
+        dwell_cap: args.max_stay.map(|max_stay| DwellCap {
+            max_stay,
+            keep_last: args.keep_last_dwell,
+        }),
     };
     let outputs = TrackOutputs {
         mcap: args.output.clone(),
