@@ -63,7 +63,7 @@ struct Args {
     penalty_long: bool,
     /// Cap the models' self-transitions (`Condition::max_stay`) in every selected condition.
     max_stay: Option<f64>,
-    /// With a dwell cap, leave each model's last state uncapped (`Condition::keep_last_dwell`).
+    /// With a dwell cap, leave each model's last state uncapped (`DwellCap::keep_last`).
     keep_last_dwell: bool,
     pose_sampling: Option<PoseSampling>,
     median_window: Option<usize>,
