@@ -778,8 +778,8 @@ mod tests {
     }
 
     /// `max_stay = 1` is the models' own dwell times (the same track bit for bit), a cap below
-    /// the models' self-transitions changes the track, so does keeping the last states' dwells
-    /// under it, and a cap outside (0, 1] is an error.
+    /// the models' self-transitions changes the track, keeping the last states' dwells leaves
+    /// those states as trained and caps the rest, and a cap outside (0, 1] is an error.
     #[test]
     #[allow(clippy::float_cmp)] // bit-identical estimates are the claim
     fn max_stay_caps_the_dwell_times() {
@@ -807,12 +807,28 @@ mod tests {
         assert_eq!(run(None, true), base, "no cap: the flag changes nothing");
         let capped = run(Some(0.3), false);
         assert_ne!(capped, base);
-        // The last states' trained dwells are above 0.3, so keeping them changes the track.
-        assert!(prep.model.actions.iter().all(|a| {
+        // Keeping the last states: those keep their trained dwell (above the cap here), every
+        // other state is capped as before.
+        let kept = prep
+            .model
+            .tracking_phmms(Some(DwellCap {
+                max_stay: 0.3,
+                keep_last: true,
+            }))
+            .unwrap();
+        let all = prep.model.tracking_phmms(Some(DwellCap::all(0.3))).unwrap();
+        for ((a, k), c) in prep.model.actions.iter().zip(&kept).zip(&all) {
             let n = a.phmm.n_states();
-            a.phmm.transition(n - 1, n - 1) > 0.3
-        }));
-        assert_ne!(run(Some(0.3), true), capped);
+            assert!(a.phmm.transition(n - 1, n - 1) > 0.3);
+            assert_eq!(k.transition(n - 1, n - 1), a.phmm.transition(n - 1, n - 1));
+            assert_eq!(k.exit_prob(n - 1), a.phmm.exit_prob(n - 1));
+            assert!((c.transition(n - 1, n - 1) - 0.3).abs() < 1e-12);
+            for i in 0..n - 1 {
+                for j in 0..n {
+                    assert_eq!(k.transition(i, j), c.transition(i, j), "({i}, {j})");
+                }
+            }
+        }
         for bad in [0.0, 1.5, f64::NAN] {
             let track = TrackOptions {
                 dwell_cap: Some(DwellCap::all(bad)),
