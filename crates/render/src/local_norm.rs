@@ -248,6 +248,16 @@ pub fn local_normalise(
 mod tests {
     use super::*;
 
+    /// Uniform values in [0, 1) from a 64-bit linear congruential generator seeded by `s`.
+    fn lcg(mut s: u64) -> impl FnMut() -> f32 {
+        move || {
+            s = s
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (s >> 40) as f32 / (1u64 << 24) as f32
+        }
+    }
+
     fn brute(g: &[f32], w: usize, h: usize, r: usize, floor: f32) -> Vec<f32> {
         let mut out = vec![0.0; w * h];
         for y in 0..h {
@@ -266,13 +276,7 @@ mod tests {
 
     #[test]
     fn equals_brute_force() {
-        let mut s = 12345u64;
-        let mut rnd = || {
-            s = s
-                .wrapping_mul(6_364_136_223_846_793_005)
-                .wrapping_add(1_442_695_040_888_963_407);
-            (s >> 40) as f32 / (1u64 << 24) as f32
-        };
+        let mut rnd = lcg(12345);
         let mut scratch = LocalNormScratch::default();
         let mut out = EdgeImage::default();
         for (w, h) in [(1, 1), (7, 5), (23, 17), (64, 3)] {
@@ -294,12 +298,9 @@ mod tests {
     #[test]
     #[allow(clippy::float_cmp)] // a maximum is exact: bit-identical values are the claim
     fn max_filter_equals_brute_force() {
-        let mut s = 99u64;
-        let mut rnd = || {
-            s = s
-                .wrapping_mul(6_364_136_223_846_793_005)
-                .wrapping_add(1_442_695_040_888_963_407);
-            (s >> 40) as f32 / (1u64 << 24) as f32 - 0.5
+        let mut rnd = {
+            let mut u = lcg(99);
+            move || u() - 0.5
         };
         let mut scratch = LocalNormScratch::default();
         let mut out = Vec::new();
