@@ -10,7 +10,7 @@
 //! repetitions 1 and 3 instead of the held-out subjects), `--camera1 ex,ey,ez,tx,ty,tz` (the
 //! second camera, actor frame), `--gamma2 G` (γ of the two-view run), `--no-body` (no torso and
 //! head in the synthesis), `--particles N`, `--contour raster|analytic`, `--gamma G` and
-//! `--short-contour-penalty λ,q`, `--speed-range LO,HI`, `--local-norm R,FLOOR`, `--penalty-long`, `--seed N`, `--max-stay P`, `--keep-last-dwell` (with a cap, the last state keeps its trained dwell), `--pose-sampling mean|S`, `--median-window N`, `--phase-jump R`, `--foreground-gate T,R,F` (override every selected condition's), `--running-background RATE,MARGIN` (the gate's background: causal, [`actrack::reproduce::GateBackground::Running`]), `--silhouette W` (the silhouette term, `Condition::silhouette`), `--diag` (per-view ε̄ of the true pose against perturbed poses and
+//! `--short-contour-penalty λ,q`, `--speed-range LO,HI`, `--local-norm R,FLOOR`, `--penalty-long`, `--seed N`, `--vertical-scale SUBJ=F,…` (per-subject factor on the models' vertical outputs, `ActorHeight::Given`), `--actor-height` (that factor from each subject's rest height, `ActorHeight::RestPose`), `--max-stay P`, `--keep-last-dwell` (with a cap, the last state keeps its trained dwell), `--pose-sampling mean|S`, `--median-window N`, `--phase-jump R`, `--foreground-gate T,R,F` (override every selected condition's), `--running-background RATE,MARGIN` (the gate's background: causal, [`actrack::reproduce::GateBackground::Running`]), `--silhouette W` (the silhouette term, `Condition::silhouette`), `--diag` (per-view ε̄ of the true pose against perturbed poses and
 //! the share of its contour the body hides; no tracking), `--trace NAME` (per-frame track and
 //! per-view ε̄ of truth and best particle) with `--dump DIR` (views of a few frames).
 
@@ -23,8 +23,8 @@ use actrack::mocap::ArmSide;
 use actrack::model::{ActionModel, DwellCap};
 use actrack::pipeline::ContourMethod;
 use actrack::reproduce::{
-    Condition, ConditionResult, TestTrial, VideoRun, back_to_back, run_condition, run_video,
-    scene_for, subject_lengths, summarise, two_action_label,
+    ActorHeight, Condition, ConditionResult, TestTrial, VideoRun, back_to_back, run_condition,
+    run_video, scene_for, subject_lengths, summarise, two_action_label,
 };
 use actrack::train::{Progress, fit_actions, import_manifest};
 use actrack_pf::PoseSampling;
@@ -78,6 +78,9 @@ struct Args {
     seed: Option<u64>,
     /// Local normalisation of G (radius px, floor) in every selected condition.
     local_norm: Option<[f64; 2]>,
+    /// The models' heights per test subject (`Condition::actor_height`): `--actor-height` or
+    /// `--vertical-scale`.
+    actor_height: Option<ActorHeight>,
     /// Per-view likelihood diagnosis of the selected trials (no tracking).
     diag: bool,
     /// Print the per-frame track of the trials whose name contains this.
@@ -111,6 +114,7 @@ impl Args {
             || self.pose_sampling.is_some()
             || self.median_window.is_some()
             || self.phase_jump.is_some()
+            || self.actor_height.is_some()
             || self.diag
     }
 
@@ -157,6 +161,7 @@ fn args() -> Args {
         penalty: None,
         speed_range: None,
         local_norm: None,
+        actor_height: None,
         penalty_long: false,
         seed: None,
         max_stay: None,
@@ -210,6 +215,24 @@ fn args() -> Args {
                 ));
             }
             "--penalty-long" => a.penalty_long = true,
+            "--actor-height" => a.actor_height = Some(ActorHeight::RestPose),
+            "--vertical-scale" => {
+                let given = list(it.next())
+                    .iter()
+                    .map(|kv| {
+                        kv.split_once('=')
+                            .and_then(|(k, v)| Some((k.to_string(), v.parse::<f64>().ok()?)))
+                            .unwrap_or_else(|| {
+                                eprintln!(
+                                    "reproduce: --vertical-scale wants SUBJECT=FACTOR,… \
+                                     (e.g. ADL008=0.86,ADL009=0.91)"
+                                );
+                                std::process::exit(2);
+                            })
+                    })
+                    .collect();
+                a.actor_height = Some(ActorHeight::Given(given));
+            }
             "--seed" => a.seed = it.next().and_then(|x| x.parse().ok()),
             "--max-stay" => a.max_stay = it.next().and_then(|x| x.parse().ok()),
             "--keep-last-dwell" => a.keep_last_dwell = true,
@@ -477,7 +500,14 @@ fn write_docs(
          (`Phmm::with_max_self_transition_before_last`, `track --max-stay 0.8 \
          --keep-last-dwell`): the demonstrations end at rest, and with that state capped the \
          particles of a finished drink leave it within a few frames, re-enter through the loop \
-         grammar and read the rest pose as the start of a reach (see the analysis).\n\
+         grammar and read the rest pose as the start of a reach (see the analysis). The row \
+         \"actor height\" scales the models' vertical outputs (z of shoulder, elbow and \
+         fingertip, `Phmm::with_output_scale`) for each test subject by its rest height over \
+         the models': the median fingertip height below the shoulder in the first frame of its \
+         trials, where the hand rests on the table, against the models' first states \
+         (`reproduce::rest_heights`, `ActionModel::rest_height`). Like the arm lengths, it \
+         is measured once per actor from the truth; the frames where the table error is read \
+         do not enter it (see the analysis).\n\
          * **Metrics** (SPEC §5.4): per-component RMSE / MAE over all frames of all trials; table \
          error = mean |r̂ − r| per component at each instance's frame of maximal extension; \
          recognition = argmax posterior at the instance's last frame; ms / frame = edge image + filter \
@@ -641,6 +671,25 @@ fn headline(seed: u64) -> Condition {
         c.named(HEADLINE)
     } else {
         c.named(&format!("{HEADLINE}, seed {seed}"))
+    }
+}
+
+/// The row of [`HEADLINE`] with the models' vertical outputs scaled to each subject's rest height.
+const CALIBRATED: &str =
+    "mono, reach+drink, headline row + actor height from the rest pose (not the paper's)";
+
+/// [`headline`] with `ActorHeight::RestPose`: each test subject's rest height (fingertip
+/// below the shoulder in the first frames, measured once per actor like the arm lengths) over
+/// the models' scales their vertical outputs.
+fn calibrated(seed: u64) -> Condition {
+    let c = Condition {
+        actor_height: ActorHeight::RestPose,
+        ..headline(seed)
+    };
+    if seed == 9 {
+        c.named(CALIBRATED)
+    } else {
+        c.named(&format!("{CALIBRATED}, seed {seed}"))
     }
 }
 
@@ -948,6 +997,7 @@ fn main() -> Res<()> {
                 .or(c.local_norm),
             penalty_long: a.penalty_long || c.penalty_long,
             seed: a.seed.unwrap_or(c.seed),
+            actor_height: a.actor_height.clone().unwrap_or(c.actor_height.clone()),
             dwell_cap: a
                 .max_stay
                 .or(c.dwell_cap.map(|d| d.max_stay))
@@ -975,6 +1025,17 @@ fn main() -> Res<()> {
             ..c
         };
         let (r, runs) = run_condition(m, tr, &c)?;
+        if c.actor_height == ActorHeight::RestPose {
+            let h = m.rest_height();
+            for (subject, r) in actrack::reproduce::rest_heights(tr) {
+                eprintln!(
+                    "  actor height {subject}: rest {:.1} cm, models {:.1} cm, vertical scale {:.3}",
+                    100.0 * r,
+                    100.0 * h,
+                    r / h
+                );
+            }
+        }
         if let Some(name) = &a.trace {
             for (t, run) in tr.iter().zip(&runs) {
                 if t.name.contains(name.as_str()) {
@@ -1116,6 +1177,9 @@ fn main() -> Res<()> {
     // 2g. The same with each model's last state left out of the cap: the demonstrations end at
     // rest, and a capped final state hands a finished drink to the start of a reach.
     go("main", &m2, &trials2, headline(9))?;
+    // 2h. The same with each test subject's height calibrated from its rest pose: the held-out
+    // subjects' table lies 3 cm nearer their shoulder than the demonstrators' on average.
+    go("main", &m2, &trials2, calibrated(9))?;
     // 3. Stronger clutter and noise.
     go(
         "main",
@@ -1139,6 +1203,7 @@ fn main() -> Res<()> {
             },
         )?;
         go("seeds", &m2, &trials2, headline(seed))?;
+        go("seeds", &m2, &trials2, calibrated(seed))?;
     }
     // 4. Ablations (subset).
     for c in [

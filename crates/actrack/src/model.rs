@@ -166,6 +166,50 @@ impl ActionModel {
             .map_err(|e| Error::Config(format!("max_stay: {e}")))
     }
 
+    /// [`ActionModel::tracking_phmms`] for an actor whose height differs from the
+    /// demonstrators': with `height_scale = Some(s)`, every model's vertical outputs (the z of
+    /// shoulder, elbow and fingertip in the actor frame, i.e. height relative to the shoulder)
+    /// are multiplied by `s` ([`Phmm::with_output_scale`]), so a table that lies at `s` times
+    /// the demonstrators' depth below the shoulder is where the generated hand lands. The
+    /// factor is the actor's rest height over [`ActionModel::rest_height`]. Errors: a bad cap,
+    /// or `s` not finite and positive.
+    pub fn tracking_phmms_scaled(
+        &self,
+        cap: Option<DwellCap>,
+        height_scale: Option<f64>,
+    ) -> Result<Vec<Phmm>> {
+        let phmms = self.tracking_phmms(cap)?;
+        let Some(z) = height_scale else {
+            return Ok(phmms);
+        };
+        let factors = [1.0, 1.0, z, 1.0, 1.0, z, 1.0, 1.0, z];
+        phmms
+            .iter()
+            .map(|p| p.with_output_scale(&factors))
+            .collect::<std::result::Result<Vec<_>, _>>()
+            .map_err(|e| Error::Config(format!("height scale: {e}")))
+    }
+
+    /// The models' rest height: the mean over actions of the first state's mean fingertip z
+    /// (actor frame: below the shoulder is negative) at the centre of the training targets, the
+    /// demonstrators' average start pose with the hand at rest. The reference of
+    /// [`ActionModel::tracking_phmms_scaled`]'s factor.
+    pub fn rest_height(&self) -> f64 {
+        let zs: Vec<f64> = self
+            .actions
+            .iter()
+            .filter(|a| a.phmm.dim() == 9 && a.phmm.theta_dim() == 2)
+            .map(|a| {
+                let (centre, _) = a.phmm.theta_normalisation();
+                a.phmm.mean(0, centre)[8]
+            })
+            .collect();
+        if zs.is_empty() {
+            return f64::NAN;
+        }
+        zs.iter().sum::<f64>() / zs.len() as f64
+    }
+
     /// The action by name.
     pub fn action(&self, name: &str) -> Option<&Action> {
         self.actions.iter().find(|a| a.name == name)

@@ -147,6 +147,10 @@ pub struct TrackOptions {
     /// Cap of the model states' self-transition probabilities ([`DwellCap`]; not in the
     /// paper); `None`: the models' dwell times.
     pub dwell_cap: Option<DwellCap>,
+    /// Factor on the models' vertical outputs for an actor whose table lies nearer to or
+    /// farther from the shoulder than the demonstrators' ([`ActionModel::tracking_phmms_scaled`];
+    /// not in the paper); `None`: the models' heights.
+    pub height_scale: Option<f64>,
 }
 
 impl Default for TrackOptions {
@@ -158,6 +162,7 @@ impl Default for TrackOptions {
             theta_prior: ThetaPrior::Training,
             speed_range: None,
             dwell_cap: None,
+            height_scale: None,
         }
     }
 }
@@ -315,7 +320,7 @@ impl Pipeline {
             .build()
             .map_err(|e| Error::Config(format!("tracker: {e}")))?;
         let names: Vec<String> = model.actions.iter().map(|a| a.name.clone()).collect();
-        let phmms = model.tracking_phmms(opts.dwell_cap)?;
+        let phmms = model.tracking_phmms_scaled(opts.dwell_cap, opts.height_scale)?;
         let tracker =
             Tracker::new(phmms.iter(), names.clone(), config).map_err(|e| Error::Model {
                 context: "building the tracker".into(),
@@ -838,6 +843,55 @@ mod tests {
                 .err()
                 .unwrap();
             assert!(e.to_string().contains("max_stay"), "{e}");
+        }
+    }
+
+    /// `height_scale = 1` is the models' own heights (the same track bit for bit); another
+    /// factor scales the tracked poses' heights (the generated fingertip follows the models'
+    /// scaled z, so the track changes), the models' rest height scales with it, and a factor
+    /// that is not finite and positive is an error.
+    #[test]
+    #[allow(clippy::float_cmp)] // bit-identical estimates are the claim
+    fn height_scale_scales_the_models_heights() {
+        let prep = small(6, 5);
+        let frames = first_view_frames(&prep);
+        let run = |height_scale: Option<f64>| {
+            let track = TrackOptions {
+                particles: 60,
+                seed: 5,
+                height_scale,
+                ..TrackOptions::default()
+            };
+            let mut p = Pipeline::new(&prep.model, &prep.scene, &track).unwrap();
+            frames
+                .iter()
+                .enumerate()
+                .map(|(t, f)| p.step(t, &[f]).unwrap().estimate.best_pose)
+                .collect::<Vec<_>>()
+        };
+        let base = run(None);
+        assert_eq!(run(Some(1.0)), base);
+        assert_ne!(run(Some(0.8)), base);
+        let scaled = prep.model.tracking_phmms_scaled(None, Some(0.8)).unwrap();
+        for (a, s) in prep.model.actions.iter().zip(&scaled) {
+            let (centre, _) = a.phmm.theta_normalisation();
+            let (m, ms) = (a.phmm.mean(0, centre), s.mean(0, centre));
+            for k in 0..9 {
+                let f = if k % 3 == 2 { 0.8 } else { 1.0 };
+                assert!((ms[k] - f * m[k]).abs() < 1e-12, "coordinate {k}");
+            }
+        }
+        let h = prep.model.rest_height();
+        assert!(h.is_finite() && h < 0.0, "{h}");
+        for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+            let track = TrackOptions {
+                height_scale: Some(bad),
+                ..TrackOptions::default()
+            };
+            let e = Pipeline::new(&prep.model, &prep.scene, &track)
+                .err()
+                .unwrap();
+            assert!(e.to_string().contains("height scale"), "{e}");
         }
     }
 

@@ -134,6 +134,22 @@ pub fn subject_lengths(trials: &[TestTrial]) -> BTreeMap<String, [f64; 2]> {
         .collect()
 }
 
+/// Each subject's rest height: the median over its trials of the fingertip's z (actor frame,
+/// i.e. below the shoulder: negative) in the first frame, where the hand is still at rest on
+/// the table. Measured once per actor, like [`subject_lengths`]; the frames of maximal
+/// extension, where the table error is read, do not enter it.
+pub fn rest_heights(trials: &[TestTrial]) -> BTreeMap<String, f64> {
+    let mut by: BTreeMap<String, Vec<f64>> = BTreeMap::new();
+    for t in trials {
+        if let Some(p) = t.poses.first()
+            && p[8].is_finite()
+        {
+            by.entry(t.subject.clone()).or_default().push(p[8]);
+        }
+    }
+    by.into_iter().map(|(s, v)| (s, median(v))).collect()
+}
+
 /// The θ prior region (actor frame): the box around every action's training targets, padded.
 pub fn theta_region(model: &ActionModel) -> ([f64; 2], [f64; 2]) {
     let mut lo = [f64::INFINITY; 2];
@@ -309,6 +325,40 @@ pub struct Condition {
     /// With `foreground_gate` and `short_contour_penalty`: add the silhouette term of this
     /// weight ([`ShortContourPenalty`]; not in the paper); `None`: contour only.
     pub silhouette: Option<f64>,
+    /// The models' heights for each test subject ([`ActorHeight`]; not in the paper).
+    pub actor_height: ActorHeight,
+}
+
+/// How a condition adapts the models' heights to a test subject: the models' vertical outputs
+/// (the z of shoulder, elbow and fingertip in the actor frame) are multiplied by a factor
+/// ([`ActionModel::tracking_phmms_scaled`]), for a subject whose table lies nearer to or farther
+/// from the shoulder than the demonstrators'.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub enum ActorHeight {
+    /// The models' own heights.
+    #[default]
+    Models,
+    /// Each subject's rest height over the models' ([`rest_heights`],
+    /// [`ActionModel::rest_height`]): an actor calibration like the arm lengths of
+    /// [`subject_lengths`].
+    RestPose,
+    /// Given factors per subject (`reproduce --vertical-scale`, a diagnostic); subjects not
+    /// listed keep the models' heights.
+    Given(Vec<(String, f64)>),
+}
+
+impl ActorHeight {
+    /// The factor for `subject`, given the subjects' rest heights and the models'.
+    pub fn factor(&self, subject: &str, rest: &BTreeMap<String, f64>, models: f64) -> Option<f64> {
+        match self {
+            Self::Models => None,
+            Self::RestPose => {
+                let h = *rest.get(subject)?;
+                (h < 0.0 && models < 0.0).then(|| h / models)
+            }
+            Self::Given(v) => v.iter().find(|(s, _)| s == subject).map(|&(_, z)| z),
+        }
+    }
 }
 
 impl Condition {
@@ -339,6 +389,7 @@ impl Condition {
             phase_jump: None,
             foreground_gate: None,
             silhouette: None,
+            actor_height: ActorHeight::Models,
         }
     }
 
@@ -874,6 +925,19 @@ pub fn run_video(
     cond: &Condition,
     overlay_frames: &[usize],
 ) -> Result<VideoRun> {
+    run_video_scaled(model, scene, segments, cond, overlay_frames, None)
+}
+
+/// [`run_video`] with the models' vertical outputs scaled by `vertical_scale`
+/// ([`Condition::actor_height`]).
+fn run_video_scaled(
+    model: &ActionModel,
+    scene: &Scene,
+    segments: &[Segment],
+    cond: &Condition,
+    overlay_frames: &[usize],
+    vertical_scale: Option<f64>,
+) -> Result<VideoRun> {
     let lengths = [
         scene
             .arm
@@ -894,7 +958,7 @@ pub fn run_video(
         synth.body = None;
     }
     let names: Vec<String> = model.actions.iter().map(|a| a.name.clone()).collect();
-    let phmms = model.tracking_phmms(cond.dwell_cap)?;
+    let phmms = model.tracking_phmms_scaled(cond.dwell_cap, vertical_scale)?;
     let mut tracker = Tracker::new(phmms.iter(), names.clone(), tracker_config(model, cond)?)
         .map_err(|e| Error::Model {
             context: "building the tracker".into(),
@@ -1179,12 +1243,15 @@ pub fn run_condition(
 ) -> Result<(ConditionResult, Vec<VideoRun>)> {
     let t0 = Instant::now();
     let lengths = subject_lengths(trials);
+    let heights = rest_heights(trials);
+    let model_height = model.rest_height();
     let runs: Vec<VideoRun> = trials
         .par_iter()
         .map(|t| {
             let l = lengths.get(&t.subject).copied().unwrap_or(t.lengths);
             let scene = scene_for(model, cond, l)?;
-            run_video(model, &scene, &[Segment::from(t)], cond, &[])
+            let scale = cond.actor_height.factor(&t.subject, &heights, model_height);
+            run_video_scaled(model, &scene, &[Segment::from(t)], cond, &[], scale)
         })
         .collect::<Result<_>>()?;
     let res = summarise(cond, model, &runs, t0.elapsed().as_secs_f64())?;
@@ -1618,6 +1685,120 @@ mod tests {
                 }
             }
         }
+    }
+
+    fn trial(subject: &str, first_z: f64, len: usize) -> TestTrial {
+        let mut poses = vec![POSES[1]; len];
+        poses[0] = [0.0, 0.0, 0.0, 0.04, 0.05, -0.28, 0.12, 0.38, first_z];
+        TestTrial {
+            name: format!("{subject}FR1"),
+            subject: subject.into(),
+            action: "reach".into(),
+            theta: [0.0, 0.65],
+            poses,
+            lengths: [0.28, 0.42],
+        }
+    }
+
+    #[test]
+    fn rest_heights_are_per_subject_medians_of_the_first_frame() {
+        let trials = [
+            trial("ADL008", -0.30, 5),
+            trial("ADL008", -0.28, 3),
+            trial("ADL008", -0.35, 4),
+            trial("ADL009", -0.31, 2),
+            trial("ADL009", f64::NAN, 2),
+            trial("ADL010", f64::NAN, 2),
+        ];
+        let h = rest_heights(&trials);
+        assert_eq!(h.len(), 2, "{h:?}");
+        assert!((h["ADL008"] + 0.30).abs() < 1e-15);
+        assert!((h["ADL009"] + 0.31).abs() < 1e-15);
+        // No trial with a finite first frame: no height, so no scale.
+        assert!(!h.contains_key("ADL010"));
+    }
+
+    #[test]
+    fn actor_height_factors() {
+        let rest: BTreeMap<String, f64> = [("ADL008".into(), -0.30), ("ADL009".into(), 0.01)]
+            .into_iter()
+            .collect();
+        assert_eq!(ActorHeight::Models.factor("ADL008", &rest, -0.34), None);
+        let f = ActorHeight::RestPose
+            .factor("ADL008", &rest, -0.34)
+            .unwrap();
+        assert!((f - 0.30 / 0.34).abs() < 1e-15);
+        // A rest height above the shoulder, an unknown subject or a model whose hand rests
+        // above the shoulder give no factor (the models' heights).
+        assert_eq!(ActorHeight::RestPose.factor("ADL009", &rest, -0.34), None);
+        assert_eq!(ActorHeight::RestPose.factor("ADL010", &rest, -0.34), None);
+        assert_eq!(ActorHeight::RestPose.factor("ADL008", &rest, 0.02), None);
+        let given = ActorHeight::Given(vec![("ADL010".into(), 0.9)]);
+        assert_eq!(given.factor("ADL010", &rest, -0.34), Some(0.9));
+        assert_eq!(given.factor("ADL008", &rest, -0.34), None);
+    }
+
+    #[test]
+    fn rest_height_is_the_first_states_mean_fingertip_z() {
+        use nalgebra::{DMatrix, DVector};
+        let phmm = |z0: f64, w: f64| {
+            let a = DMatrix::from_row_slice(2, 2, &[0.5, 0.5, 0.0, 0.9]);
+            let mut b0 = DVector::from_row_slice(&POSES[0]);
+            b0[8] = z0;
+            let b1 = DVector::from_row_slice(&POSES[1]);
+            // θ moves the fingertip's z: the height is read at the centre of the targets.
+            let mut w0 = DMatrix::zeros(9, 2);
+            w0[(8, 1)] = w;
+            let cov = DMatrix::from_diagonal_element(9, 9, 1e-4);
+            actrack_phmm::Phmm::from_params(
+                &[1.0, 0.0],
+                &a,
+                &[0.0, 0.1],
+                &[b0, b1],
+                &[w0, DMatrix::zeros(9, 2)],
+                &[cov.clone(), cov],
+                1,
+                actrack_phmm::EndMode::MustEnd,
+            )
+            .unwrap()
+        };
+        let action = |name: &str, p: actrack_phmm::Phmm| crate::model::Action {
+            name: name.into(),
+            phmm: p,
+            theta_mean: [0.0, 0.6],
+            theta_cov: [[1e-3, 0.0], [0.0, 1e-3]],
+            theta_min: [-0.1, 0.5],
+            theta_max: [0.1, 0.7],
+            n_trials: 2,
+            iterations: 1,
+            converged: true,
+            final_log_likelihood: 0.0,
+            median_frames: 30.0,
+        };
+        let (reach, drink) = (phmm(-0.34, 0.05), phmm(-0.30, -0.02));
+        let centre = |p: &actrack_phmm::Phmm| p.theta_normalisation().0.to_vec();
+        let want = 0.5 * ((-0.34 + 0.05 * centre(&reach)[1]) + (-0.30 - 0.02 * centre(&drink)[1]));
+        let model = ActionModel {
+            actions: vec![action("reach", reach), action("drink", drink)],
+            arm_lengths: crate::model::ArmLengths {
+                upper_arm: 0.28,
+                forearm_hand: 0.42,
+            },
+            theta_frame: crate::model::THETA_FRAME.into(),
+            preprocessing: crate::mocap::trial::Preprocessing::default(),
+            provenance: crate::model::Provenance {
+                tool: "test".into(),
+                created: String::new(),
+                manifest: None,
+                files: Vec::new(),
+                states: 2,
+                max_jump: 1,
+                max_iterations: 1,
+                cov_floor: 0.0,
+            },
+        };
+        let got = model.rest_height();
+        assert!((got - want).abs() < 1e-12, "{got} against {want}");
     }
 
     #[test]

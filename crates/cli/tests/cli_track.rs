@@ -297,6 +297,18 @@ fn bad_input_names_the_frame_with_exit_code_2() {
             &["--max-stay"],
         );
     }
+    // So is a bad height scale.
+    for bad in ["0", "x", "inf", "nan"] {
+        expect_input_error(
+            &track(
+                &f.root,
+                "video/frames",
+                &["--csv", "x.csv", "--height-scale", bad],
+                None,
+            ),
+            &["--height-scale"],
+        );
+    }
     // Keeping the last state's dwell needs a cap.
     expect_input_error(
         &track(

@@ -106,6 +106,11 @@ fn train_inspect_classify_synthetic() {
         out.contains("reach") && out.contains("drink") && out.contains("6 states"),
         "{out}"
     );
+    // The rest height, the reference of `track --height-scale`: the fingertip below the
+    // shoulder, in metres (as the model computes it).
+    let model = actrack::model::ActionModel::load(&dir.path().join("m.actrack.json")).unwrap();
+    let want = format!("rest height  fingertip {:.3} m below", -model.rest_height());
+    assert!(out.contains(&want), "{want:?} in {out}");
 
     let o = cli(
         dir.path(),

@@ -584,6 +584,54 @@ impl Phmm {
         Ok(model.with_training_thetas(self.training_thetas.clone()))
     }
 
+    /// The model of the observations scaled coordinate by coordinate: `y' = D y` with
+    /// `D = diag(scale)`, so every state's mean `μ̄_i + W_i θ` becomes `D (μ̄_i + W_i θ)` and its
+    /// covariance `D Σ_i D`; transitions, θ units and training θ are unchanged. This adapts a
+    /// model to an actor who differs from the demonstrators by a known stretch of one axis (the
+    /// height of the shoulder above the table, say). Errors: `scale` not of length d, or an entry
+    /// that is not finite and positive.
+    pub fn with_output_scale(&self, scale: &[f64]) -> Result<Phmm, PhmmError> {
+        if scale.len() != self.d || !scale.iter().all(|s| s.is_finite() && *s > 0.0) {
+            return Err(PhmmError::InvalidParameter {
+                name: "scale",
+                reason: format!(
+                    "needs {} finite, positive factors (one per observation coordinate), got {scale:?}",
+                    self.d
+                ),
+            });
+        }
+        let mean_bias = self
+            .mean_bias
+            .iter()
+            .map(|b| DVector::from_fn(self.d, |r, _| scale[r] * b[r]))
+            .collect();
+        let weights = self
+            .weights
+            .iter()
+            .map(|w| DMatrix::from_fn(self.d, self.p, |r, c| scale[r] * w[(r, c)]))
+            .collect();
+        let covariances = self
+            .covariances
+            .iter()
+            .map(|s| DMatrix::from_fn(self.d, self.d, |r, c| scale[r] * s[(r, c)] * scale[c]))
+            .collect();
+        let model = Phmm::assemble(
+            false,
+            self.j,
+            self.end_mode,
+            self.covariance_kind,
+            self.start.clone(),
+            self.trans.clone(),
+            self.exit.clone(),
+            mean_bias,
+            weights,
+            self.theta_center.clone(),
+            self.theta_scale.clone(),
+            covariances,
+        )?;
+        Ok(model.with_training_thetas(self.training_thetas.clone()))
+    }
+
     /// The model with every self-transition capped at `max_stay`: a state i with
     /// `a_ii > max_stay` keeps `a_ii = max_stay` and its other transitions and exit scaled by
     /// `(1 − max_stay) / (1 − a_ii)`, so the order of the states, the relative odds of the jumps

@@ -35,6 +35,7 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
             "file": args.file.display().to_string(),
             "actions": actions,
             "arm_lengths": m.arm_lengths,
+            "rest_height": m.rest_height(),
             "theta_frame": m.theta_frame,
             "preprocessing": m.preprocessing,
             "provenance": m.provenance,
@@ -62,6 +63,10 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
     println!(
         "arm lengths  L1 (shoulder→elbow) {:.3} m, L2 (elbow→fingertip) {:.3} m",
         m.arm_lengths.upper_arm, m.arm_lengths.forearm_hand
+    );
+    println!(
+        "rest height  fingertip {:.3} m below the shoulder (first states; `track --height-scale`'s reference)",
+        -m.rest_height()
     );
     println!("θ frame      {}", m.theta_frame);
     let p = &m.preprocessing;

@@ -88,6 +88,25 @@ pub struct Args {
     /// finished drink look like the start of a reach).
     #[arg(long, requires = "max_stay")]
     pub keep_last_dwell: bool,
+    /// Multiply the models' heights (actor-frame z of shoulder, elbow and fingertip) by S > 0,
+    /// for an actor whose table lies nearer to (S < 1) or farther from the shoulder than the
+    /// demonstrators': S = the actor's fingertip height below the shoulder with the hand at
+    /// rest on the table over the models' (`inspect` prints the models' rest height). Default:
+    /// the models' heights.
+    #[arg(long, value_name = "S", value_parser = parse_height_scale)]
+    pub height_scale: Option<f64>,
+}
+
+/// `--height-scale S`: finite, S > 0.
+fn parse_height_scale(s: &str) -> Result<f64, String> {
+    let v: f64 = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{s}` is not a number (expected S > 0, e.g. 0.9)"))?;
+    if !(v.is_finite() && v > 0.0) {
+        return Err(format!("needs a finite S > 0, got {v}"));
+    }
+    Ok(v)
 }
 
 /// `--max-stay P`: 0 < P ≤ 1.
@@ -179,6 +198,7 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
             max_stay,
             keep_last: args.keep_last_dwell,
         }),
+        height_scale: args.height_scale,
     };
     let outputs = TrackOutputs {
         mcap: args.output.clone(),
