@@ -981,6 +981,13 @@ fn main() -> Res<()> {
         if !a.selected(&c.name) {
             return Ok(());
         }
+        if a.keep_last_dwell && a.max_stay.is_none() && c.dwell_cap.is_none() {
+            return Err(format!(
+                "--keep-last-dwell needs a dwell cap: `{}` has none, add --max-stay P",
+                c.name
+            )
+            .into());
+        }
         let c = Condition {
             body: !a.no_body,
             particles: a.particles.unwrap_or(c.particles),
