@@ -10,7 +10,7 @@
 //! repetitions 1 and 3 instead of the held-out subjects), `--camera1 ex,ey,ez,tx,ty,tz` (the
 //! second camera, actor frame), `--gamma2 G` (γ of the two-view run), `--no-body` (no torso and
 //! head in the synthesis), `--particles N`, `--contour raster|analytic`, `--gamma G` and
-//! `--short-contour-penalty λ,q`, `--speed-range LO,HI`, `--local-norm R,FLOOR`, `--penalty-long`, `--seed N`, `--vertical-scale SUBJ=F,…` (per-subject factor on the models' vertical outputs, `ActorHeight::Given`), `--actor-height` (that factor from each subject's rest height, `ActorHeight::RestPose`), `--max-stay P`, `--keep-last-dwell` (with a cap, the last state keeps its trained dwell), `--pose-sampling mean|S`, `--median-window N`, `--phase-jump R`, `--foreground-gate T,R,F` (override every selected condition's), `--running-background RATE,MARGIN` (the gate's background: causal, [`actrack::reproduce::GateBackground::Running`]), `--silhouette W` (the silhouette term, `Condition::silhouette`), `--diag` (per-view ε̄ of the true pose against perturbed poses and
+//! `--short-contour-penalty λ,q`, `--speed-range LO,HI`, `--local-norm R,FLOOR`, `--penalty-long`, `--seed N`, `--vertical-scale SUBJ=F,…` (per-subject factor on the models' vertical outputs, `ActorHeight::Given`), `--actor-height` (that factor from each subject's rest height, `ActorHeight::RestPose`), `--pose-noise C` (the models' covariances times C), `--max-stay P`, `--keep-last-dwell` (with a cap, the last state keeps its trained dwell), `--pose-sampling mean|S`, `--median-window N`, `--phase-jump R`, `--foreground-gate T,R,F` (override every selected condition's), `--running-background RATE,MARGIN` (the gate's background: causal, [`actrack::reproduce::GateBackground::Running`]), `--silhouette W` (the silhouette term, `Condition::silhouette`), `--diag` (per-view ε̄ of the true pose against perturbed poses and
 //! the share of its contour the body hides; no tracking), `--trace NAME` (per-frame track and
 //! per-view ε̄ of truth and best particle) with `--dump DIR` (views of a few frames).
 
@@ -81,6 +81,8 @@ struct Args {
     /// The models' heights per test subject (`Condition::actor_height`): `--actor-height` or
     /// `--vertical-scale`.
     actor_height: Option<ActorHeight>,
+    /// Factor on the models' covariances (`Condition::pose_noise`).
+    pose_noise: Option<f64>,
     /// Per-view likelihood diagnosis of the selected trials (no tracking).
     diag: bool,
     /// Print the per-frame track of the trials whose name contains this.
@@ -115,6 +117,7 @@ impl Args {
             || self.median_window.is_some()
             || self.phase_jump.is_some()
             || self.actor_height.is_some()
+            || self.pose_noise.is_some()
             || self.diag
     }
 
@@ -162,6 +165,7 @@ fn args() -> Args {
         speed_range: None,
         local_norm: None,
         actor_height: None,
+        pose_noise: None,
         penalty_long: false,
         seed: None,
         max_stay: None,
@@ -216,6 +220,7 @@ fn args() -> Args {
             }
             "--penalty-long" => a.penalty_long = true,
             "--actor-height" => a.actor_height = Some(ActorHeight::RestPose),
+            "--pose-noise" => a.pose_noise = it.next().and_then(|x| x.parse().ok()),
             "--vertical-scale" => {
                 let given = list(it.next())
                     .iter()
@@ -1005,6 +1010,7 @@ fn main() -> Res<()> {
             penalty_long: a.penalty_long || c.penalty_long,
             seed: a.seed.unwrap_or(c.seed),
             actor_height: a.actor_height.clone().unwrap_or(c.actor_height.clone()),
+            pose_noise: a.pose_noise.unwrap_or(c.pose_noise),
             dwell_cap: a
                 .max_stay
                 .or(c.dwell_cap.map(|d| d.max_stay))

@@ -327,6 +327,9 @@ pub struct Condition {
     pub silhouette: Option<f64>,
     /// The models' heights for each test subject ([`ActorHeight`]; not in the paper).
     pub actor_height: ActorHeight,
+    /// Factor on every model state's covariance ([`actrack_phmm::Phmm::with_covariance_scale`];
+    /// 1: the trained spread of the generated poses, the paper's).
+    pub pose_noise: f64,
 }
 
 /// How a condition adapts the models' heights to a test subject: the models' vertical outputs
@@ -390,6 +393,7 @@ impl Condition {
             foreground_gate: None,
             silhouette: None,
             actor_height: ActorHeight::Models,
+            pose_noise: 1.0,
         }
     }
 
@@ -958,7 +962,16 @@ fn run_video_scaled(
         synth.body = None;
     }
     let names: Vec<String> = model.actions.iter().map(|a| a.name.clone()).collect();
-    let phmms = model.tracking_phmms_scaled(cond.dwell_cap, vertical_scale)?;
+    let mut phmms = model.tracking_phmms_scaled(cond.dwell_cap, vertical_scale)?;
+    #[allow(clippy::float_cmp)] // exactly 1: the trained models, bit for bit
+    let scaled_noise = cond.pose_noise != 1.0;
+    if scaled_noise {
+        phmms = phmms
+            .iter()
+            .map(|p| p.with_covariance_scale(cond.pose_noise))
+            .collect::<std::result::Result<_, _>>()
+            .map_err(|e| Error::Config(format!("pose noise: {e}")))?;
+    }
     let mut tracker = Tracker::new(phmms.iter(), names.clone(), tracker_config(model, cond)?)
         .map_err(|e| Error::Model {
             context: "building the tracker".into(),

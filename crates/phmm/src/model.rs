@@ -632,6 +632,34 @@ impl Phmm {
         Ok(model.with_training_thetas(self.training_thetas.clone()))
     }
 
+    /// The model with every state's covariance multiplied by `c` (means, transitions and θ
+    /// unchanged): `c < 1` draws generated poses closer to the state means. Errors: `c` not
+    /// finite and positive.
+    pub fn with_covariance_scale(&self, c: f64) -> Result<Phmm, PhmmError> {
+        if !(c.is_finite() && c > 0.0) {
+            return Err(PhmmError::InvalidParameter {
+                name: "c",
+                reason: format!("must be finite and positive, got {c}"),
+            });
+        }
+        let covariances = self.covariances.iter().map(|s| s * c).collect();
+        let model = Phmm::assemble(
+            false,
+            self.j,
+            self.end_mode,
+            self.covariance_kind,
+            self.start.clone(),
+            self.trans.clone(),
+            self.exit.clone(),
+            self.mean_bias.clone(),
+            self.weights.clone(),
+            self.theta_center.clone(),
+            self.theta_scale.clone(),
+            covariances,
+        )?;
+        Ok(model.with_training_thetas(self.training_thetas.clone()))
+    }
+
     /// The model with every self-transition capped at `max_stay`: a state i with
     /// `a_ii > max_stay` keeps `a_ii = max_stay` and its other transitions and exit scaled by
     /// `(1 − max_stay) / (1 − a_ii)`, so the order of the states, the relative odds of the jumps

@@ -1,5 +1,6 @@
 //! `Phmm::with_output_scale`: the model of `y' = D y`, checked against the change of variables
-//! `log p'(D X | θ) = log p(X | θ) − T Σ_k log d_k` and against the scaled means and covariances.
+//! `log p'(D X | θ) = log p(X | θ) − T Σ_k log d_k` and against the scaled means and covariances;
+//! `Phmm::with_covariance_scale` against the Gaussian's closed form.
 
 #![allow(clippy::unwrap_used, clippy::float_cmp)] // unchanged transitions are bit-identical
 
@@ -137,4 +138,52 @@ fn bad_scales_are_errors() {
     // The identity scale gives the same model.
     let same = m.with_output_scale(&[1.0; 3]).unwrap();
     assert_eq!(same.covariance(2), m.covariance(2));
+}
+
+#[test]
+fn covariance_scale_against_the_closed_form() {
+    let m = model();
+    let c = 0.4;
+    let s = m.with_covariance_scale(c).unwrap();
+    for i in 0..3 {
+        assert!(
+            (s.covariance(i) - m.covariance(i) * c).amax() < 1e-18,
+            "state {i}"
+        );
+        assert_eq!(s.mean(i, &[0.2, -0.1]), m.mean(i, &[0.2, -0.1]));
+    }
+    // A one-state model and a one-frame sequence: log N(μ + √c (x − μ); μ, cΣ) =
+    // log N(x; μ, Σ) − (d/2) ln c, the start and exit terms being the same in both models.
+    let a = DMatrix::from_row_slice(1, 1, &[0.9]);
+    let mu = DVector::from_row_slice(&[0.1, -0.2, 0.3]);
+    let one = Phmm::from_params(
+        &[1.0],
+        &a,
+        &[0.1],
+        std::slice::from_ref(&mu),
+        &[DMatrix::from_row_slice(
+            3,
+            2,
+            &[0.02, 0.0, -0.01, 0.03, 0.0, 0.01],
+        )],
+        &[m.covariance(1).clone()],
+        1,
+        EndMode::MustEnd,
+    )
+    .unwrap();
+    let scaled = one.with_covariance_scale(c).unwrap();
+    let theta = [0.3, -0.4];
+    let mean = one.mean(0, &theta);
+    let x = DMatrix::from_row_slice(1, 3, &[0.13, -0.25, 0.27]);
+    let y = DMatrix::from_fn(1, 3, |_, k| mean[k] + c.sqrt() * (x[(0, k)] - mean[k]));
+    let lp = one.log_likelihood(&x, &theta).unwrap();
+    let lq = scaled.log_likelihood(&y, &theta).unwrap();
+    let want = lp - 1.5 * c.ln();
+    assert!((lq - want).abs() < 1e-9, "{lq} against {want}");
+    for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+        assert!(matches!(
+            m.with_covariance_scale(bad),
+            Err(PhmmError::InvalidParameter { name: "c", .. })
+        ));
+    }
 }
