@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 
 use actrack::manifest::{Manifest, TrainOptions};
 use actrack::mocap::ArmSide;
-use actrack::reproduce::{Condition, Segment, run_condition, scene_for, test_trials};
+use actrack::reproduce::{ActorHeight, Condition, Segment, run_condition, scene_for, test_trials};
 use actrack::train::{fit_actions, import_manifest};
 
 fn project_root() -> PathBuf {
@@ -100,4 +100,30 @@ fn reproduce_one_held_out_trial() {
         let s: f64 = r.posterior.iter().sum();
         assert!((s - 1.0).abs() < 1e-6, "posterior sums to {s}");
     }
+
+    // The actor height: ADL008's hand rests below the shoulder, the models' too, so the rest
+    // pose gives a factor near 1 and a track that differs from the uncalibrated one; a given
+    // factor of exactly 1 gives the uncalibrated track bit for bit.
+    let rest = actrack::reproduce::rest_heights(&held_out);
+    let models = model.rest_height();
+    let factor = ActorHeight::RestPose
+        .factor("ADL008", &rest, models)
+        .unwrap();
+    assert!((0.7..1.3).contains(&factor), "{factor}");
+    let given = Condition {
+        actor_height: ActorHeight::Given(vec![("ADL008".into(), 1.0)]),
+        ..cond.clone()
+    };
+    let (_, same) = run_condition(&model, &held_out, &given).unwrap();
+    let poses = |r: &[actrack::reproduce::VideoRun]| -> Vec<[f64; 9]> {
+        r[0].track.rows.iter().map(|x| x.pose).collect()
+    };
+    assert_eq!(poses(&same), poses(&runs));
+    let calibrated = Condition {
+        actor_height: ActorHeight::RestPose,
+        ..cond
+    };
+    let (res, moved) = run_condition(&model, &held_out, &calibrated).unwrap();
+    assert_ne!(poses(&moved), poses(&runs));
+    assert!(res.report.overall.rmse.is_finite() && res.report.overall.rmse < 0.3);
 }

@@ -932,9 +932,9 @@ pub fn run_video(
     run_video_scaled(model, scene, segments, cond, overlay_frames, None)
 }
 
-/// [`run_video`] with the models' vertical outputs scaled by `vertical_scale`
-/// ([`Condition::actor_height`]).
-fn run_video_scaled(
+/// [`run_video`] with the models' vertical outputs scaled by `vertical_scale`, the factor of
+/// [`ActorHeight::factor`] for the video's subject ([`Condition::actor_height`]).
+pub fn run_video_scaled(
     model: &ActionModel,
     scene: &Scene,
     segments: &[Segment],
