@@ -567,14 +567,33 @@ impl Phmm {
             .iter()
             .map(|s| DMatrix::from_fn(m, m, |r, c| s[(dims[r], dims[c])]))
             .collect();
+        self.rebuilt(
+            self.trans.clone(),
+            self.exit.clone(),
+            mean_bias,
+            weights,
+            covariances,
+        )
+    }
+
+    /// This model with other transitions, exits, means and covariances (the rest, including
+    /// the training θ, kept): the derived tables are recomputed and checked by `assemble`.
+    fn rebuilt(
+        &self,
+        trans: Vec<f64>,
+        exit: Vec<f64>,
+        mean_bias: Vec<DVector<f64>>,
+        weights: Vec<DMatrix<f64>>,
+        covariances: Vec<DMatrix<f64>>,
+    ) -> Result<Phmm, PhmmError> {
         let model = Phmm::assemble(
             false,
             self.j,
             self.end_mode,
             self.covariance_kind,
             self.start.clone(),
-            self.trans.clone(),
-            self.exit.clone(),
+            trans,
+            exit,
             mean_bias,
             weights,
             self.theta_center.clone(),
@@ -615,21 +634,13 @@ impl Phmm {
             .iter()
             .map(|s| DMatrix::from_fn(self.d, self.d, |r, c| scale[r] * s[(r, c)] * scale[c]))
             .collect();
-        let model = Phmm::assemble(
-            false,
-            self.j,
-            self.end_mode,
-            self.covariance_kind,
-            self.start.clone(),
+        self.rebuilt(
             self.trans.clone(),
             self.exit.clone(),
             mean_bias,
             weights,
-            self.theta_center.clone(),
-            self.theta_scale.clone(),
             covariances,
-        )?;
-        Ok(model.with_training_thetas(self.training_thetas.clone()))
+        )
     }
 
     /// The model with every state's covariance multiplied by `c` (means, transitions and θ
@@ -643,21 +654,13 @@ impl Phmm {
             });
         }
         let covariances = self.covariances.iter().map(|s| s * c).collect();
-        let model = Phmm::assemble(
-            false,
-            self.j,
-            self.end_mode,
-            self.covariance_kind,
-            self.start.clone(),
+        self.rebuilt(
             self.trans.clone(),
             self.exit.clone(),
             self.mean_bias.clone(),
             self.weights.clone(),
-            self.theta_center.clone(),
-            self.theta_scale.clone(),
             covariances,
-        )?;
-        Ok(model.with_training_thetas(self.training_thetas.clone()))
+        )
     }
 
     /// The model with every self-transition capped at `max_stay`: a state i with
@@ -704,21 +707,13 @@ impl Phmm {
                 exit[i] *= scale;
             }
         }
-        let model = Phmm::assemble(
-            false,
-            self.j,
-            self.end_mode,
-            self.covariance_kind,
-            self.start.clone(),
+        self.rebuilt(
             trans,
             exit,
             self.mean_bias.clone(),
             self.weights.clone(),
-            self.theta_center.clone(),
-            self.theta_scale.clone(),
             self.covariances.clone(),
-        )?;
-        Ok(model.with_training_thetas(self.training_thetas.clone()))
+        )
     }
 
     /// Number of states N.
