@@ -60,6 +60,22 @@ def test_track_is_deterministic(model, scene):
     np.testing.assert_allclose(a["action_posterior"].sum(axis=1), 1.0)
 
 
+def test_height_scale(model, scene):
+    """`height_scale` multiplies the models' heights (`track --height-scale`): 1 is the models'
+    own, bit for bit; another factor tracks; a factor that is not finite and positive is a
+    ValueError naming it."""
+    frames = synthetic_frames(4)
+    base = actrack.Tracker(model, scene, n_particles=64, seed=5).track(frames)
+    same = actrack.Tracker(model, scene, n_particles=64, seed=5, height_scale=1.0).track(frames)
+    for key in base:
+        np.testing.assert_array_equal(base[key], same[key])
+    other = actrack.Tracker(model, scene, n_particles=64, seed=5, height_scale=0.8).track(frames)
+    assert np.isfinite(other["best_pose"]).all()
+    for bad in [0.0, -1.0, float("nan"), float("inf")]:
+        with pytest.raises(ValueError, match="height scale"):
+            actrack.Tracker(model, scene, height_scale=bad)
+
+
 def test_track_equals_frame_by_frame_steps(model, scene):
     """`track` overlaps each step with the next frame's edge image; the estimates are those of
     `step` called frame by frame, and frame numbering carries on after it."""

@@ -299,7 +299,13 @@ class Tracker:
     """The action-space particle filter of an action model in a scene."""
 
     def __new__(
-        cls, model: ActionModel, scene: Scene, *, n_particles: int = 400, seed: int = 0
+        cls,
+        model: ActionModel,
+        scene: Scene,
+        *,
+        n_particles: int = 400,
+        seed: int = 0,
+        height_scale: float | None = None,
     ) -> Tracker: ...
     @property
     def actions(self) -> list[str]: ...
