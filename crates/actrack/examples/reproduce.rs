@@ -637,16 +637,13 @@ fn write_docs(
 /// headline row's, other seeds get the seed in the name.
 fn capped_penalty(seed: u64) -> Condition {
     let name = "mono, reach+drink, short-contour penalty + dwell cap 0.8 (not the paper's)";
-    Condition {
+    let c = Condition {
         seed,
         short_contour_penalty: Some([1.0, 0.5]),
         dwell_cap: Some(DwellCap::all(actrack::reproduce::MAX_STAY)),
-        ..Condition::monocular(&if seed == 9 {
-            name.to_string()
-        } else {
-            format!("{name}, seed {seed}")
-        })
-    }
+        ..Condition::monocular(name)
+    };
+    seed_named(c, name, seed)
 }
 
 /// The row of the foreground-gated condition.
@@ -674,10 +671,15 @@ fn headline(seed: u64) -> Condition {
         }),
         ..capped_penalty(seed)
     };
+    seed_named(c, HEADLINE, seed)
+}
+
+/// `name` for seed 9 (the headline rows' seed), else `name` with the seed appended.
+fn seed_named(c: Condition, name: &str, seed: u64) -> Condition {
     if seed == 9 {
-        c.named(HEADLINE)
+        c.named(name)
     } else {
-        c.named(&format!("{HEADLINE}, seed {seed}"))
+        c.named(&format!("{name}, seed {seed}"))
     }
 }
 
@@ -693,11 +695,7 @@ fn calibrated(seed: u64) -> Condition {
         actor_height: ActorHeight::RestPose,
         ..headline(seed)
     };
-    if seed == 9 {
-        c.named(CALIBRATED)
-    } else {
-        c.named(&format!("{CALIBRATED}, seed {seed}"))
-    }
+    seed_named(c, CALIBRATED, seed)
 }
 
 /// The three-action model with the headline row's configuration.

@@ -782,6 +782,27 @@ mod tests {
         }
     }
 
+    /// The options of the small option tests: 60 particles, seed 5, everything else default.
+    const SMALL_TRACK: TrackOptions = TrackOptions {
+        particles: 60,
+        seed: 5,
+        contour: ContourMethod::Raster,
+        theta_prior: ThetaPrior::Training,
+        speed_range: None,
+        dwell_cap: None,
+        height_scale: None,
+    };
+
+    /// The best pose of every frame of `frames` (first view) tracked with `track`.
+    fn best_poses(prep: &Prepared, frames: &[RgbImage], track: &TrackOptions) -> Vec<[f64; 9]> {
+        let mut p = Pipeline::new(&prep.model, &prep.scene, track).unwrap();
+        frames
+            .iter()
+            .enumerate()
+            .map(|(t, f)| p.step(t, &[f]).unwrap().estimate.best_pose)
+            .collect()
+    }
+
     /// `max_stay = 1` is the models' own dwell times (the same track bit for bit), a cap below
     /// the models' self-transitions changes the track, keeping the last states' dwells leaves
     /// those states as trained and caps the rest, and a cap outside (0, 1] is an error.
@@ -791,21 +812,17 @@ mod tests {
         let prep = small(6, 5);
         let frames = first_view_frames(&prep);
         let run = |max_stay: Option<f64>, keep_last_dwell: bool| {
-            let track = TrackOptions {
-                particles: 60,
-                seed: 5,
-                dwell_cap: max_stay.map(|max_stay| DwellCap {
-                    max_stay,
-                    keep_last: keep_last_dwell,
-                }),
-                ..TrackOptions::default()
-            };
-            let mut p = Pipeline::new(&prep.model, &prep.scene, &track).unwrap();
-            frames
-                .iter()
-                .enumerate()
-                .map(|(t, f)| p.step(t, &[f]).unwrap().estimate.best_pose)
-                .collect::<Vec<_>>()
+            best_poses(
+                &prep,
+                &frames,
+                &TrackOptions {
+                    dwell_cap: max_stay.map(|max_stay| DwellCap {
+                        max_stay,
+                        keep_last: keep_last_dwell,
+                    }),
+                    ..SMALL_TRACK
+                },
+            )
         };
         let base = run(None, false);
         assert_eq!(run(Some(1.0), false), base);
@@ -856,18 +873,14 @@ mod tests {
         let prep = small(6, 5);
         let frames = first_view_frames(&prep);
         let run = |height_scale: Option<f64>| {
-            let track = TrackOptions {
-                particles: 60,
-                seed: 5,
-                height_scale,
-                ..TrackOptions::default()
-            };
-            let mut p = Pipeline::new(&prep.model, &prep.scene, &track).unwrap();
-            frames
-                .iter()
-                .enumerate()
-                .map(|(t, f)| p.step(t, &[f]).unwrap().estimate.best_pose)
-                .collect::<Vec<_>>()
+            best_poses(
+                &prep,
+                &frames,
+                &TrackOptions {
+                    height_scale,
+                    ..SMALL_TRACK
+                },
+            )
         };
         let base = run(None);
         assert_eq!(run(Some(1.0)), base);

@@ -6,8 +6,8 @@
 
 use actrack_phmm::{EndMode, Phmm, PhmmError};
 use nalgebra::{DMatrix, DVector};
-use rand::SeedableRng;
-use rand_pcg::Pcg64Mcg;
+
+mod common;
 
 /// Three states, 3-D observations, 2-D θ, full covariances (off-diagonal terms make the
 /// `D Σ D` test meaningful).
@@ -99,7 +99,7 @@ fn likelihood_follows_the_change_of_variables() {
     let s = m.with_output_scale(&SCALE).unwrap();
     let log_det: f64 = SCALE.iter().map(|d| d.ln()).sum();
     for (theta, seed) in [([0.1, 0.2], 1_u64), ([-0.5, 0.4], 2), ([0.0, 0.0], 3)] {
-        let mut rng = Pcg64Mcg::seed_from_u64(seed);
+        let mut rng = common::rng(seed);
         let (x, _) = m.sample(&theta, Some(25), &mut rng);
         let mut y = x.clone();
         for mut row in y.row_iter_mut() {
