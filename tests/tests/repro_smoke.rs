@@ -119,6 +119,14 @@ fn reproduce_one_held_out_trial() {
         r[0].track.rows.iter().map(|x| x.pose).collect()
     };
     assert_eq!(poses(&same), poses(&runs));
+    // The fingertip floor at ADL008's rest height moves the track, which stays finite.
+    let floored = Condition {
+        fingertip_floor: Some(actrack::pipeline::FINGERTIP_FLOOR_SIGMA),
+        ..cond.clone()
+    };
+    let (res, floor_runs) = run_condition(&model, &held_out, &floored).unwrap();
+    assert_ne!(poses(&floor_runs), poses(&runs));
+    assert!(res.report.overall.rmse.is_finite() && res.report.overall.rmse < 0.3);
     let calibrated = Condition {
         actor_height: ActorHeight::RestPose,
         ..cond

@@ -33,8 +33,8 @@ use crate::mocap::ArmSide;
 use crate::mocap::trial::{Importer, median};
 use crate::model::{ActionModel, DwellCap};
 use crate::pipeline::{
-    FrameResult, GAMMA, SceneObservation, draw_overlay, render_arm, render_camera, track_row,
-    training_theta_regions,
+    FrameResult, GAMMA, SceneObservation, draw_overlay, render_arm, render_camera, step_with_floor,
+    track_row, training_theta_regions,
 };
 use crate::scene::{
     ArmGeometry, Camera, EdgeSettings, Placement, Scene, Side, TableRegion, look_at,
@@ -330,6 +330,10 @@ pub struct Condition {
     /// Factor on every model state's covariance ([`actrack_phmm::Phmm::with_covariance_scale`];
     /// 1: the trained spread of the generated poses, the paper's).
     pub pose_noise: f64,
+    /// The soft floor under the fingertip ([`crate::pipeline::FingertipFloor`]; not in the
+    /// paper): its σ (metres), the floor at the subject's rest height ([`rest_heights`]);
+    /// `None`: no floor.
+    pub fingertip_floor: Option<f64>,
 }
 
 /// How a condition adapts the models' heights to a test subject: the models' vertical outputs
@@ -394,6 +398,7 @@ impl Condition {
             silhouette: None,
             actor_height: ActorHeight::Models,
             pose_noise: 1.0,
+            fingertip_floor: None,
         }
     }
 
@@ -929,19 +934,56 @@ pub fn run_video(
     cond: &Condition,
     overlay_frames: &[usize],
 ) -> Result<VideoRun> {
-    run_video_scaled(model, scene, segments, cond, overlay_frames, None)
+    run_video_calibrated(
+        model,
+        scene,
+        segments,
+        cond,
+        overlay_frames,
+        ActorCalibration::default(),
+    )
 }
 
-/// [`run_video`] with the models' vertical outputs scaled by `vertical_scale`, the factor of
-/// [`ActorHeight::factor`] for the video's subject ([`Condition::actor_height`]).
-pub fn run_video_scaled(
+/// What a run knows about its actor besides the scene's arm lengths, measured once per actor
+/// from its motion ([`ActorCalibration::of`]) as a live system would take it from a
+/// calibration pose.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ActorCalibration {
+    /// Factor on the models' vertical outputs ([`ActorHeight::factor`],
+    /// [`Condition::actor_height`]); `None`: the models' heights.
+    pub vertical_scale: Option<f64>,
+    /// The fingertip's rest height (actor frame z, metres; [`rest_heights`]): z₀ of the
+    /// fingertip floor when [`Condition::fingertip_floor`] is set.
+    pub floor: Option<f64>,
+}
+
+impl ActorCalibration {
+    /// The calibration `cond` uses for `subject`, from the subjects' rest heights
+    /// ([`rest_heights`]) and the models' ([`ActionModel::rest_height`]).
+    pub fn of(cond: &Condition, subject: &str, rest: &BTreeMap<String, f64>, models: f64) -> Self {
+        Self {
+            vertical_scale: cond.actor_height.factor(subject, rest, models),
+            floor: cond
+                .fingertip_floor
+                .and_then(|_| rest.get(subject).copied()),
+        }
+    }
+}
+
+/// [`run_video`] for an actor with a [`ActorCalibration`]: the models' vertical outputs scaled
+/// by its factor, and the fingertip floor ([`Condition::fingertip_floor`]) at its rest height.
+pub fn run_video_calibrated(
     model: &ActionModel,
     scene: &Scene,
     segments: &[Segment],
     cond: &Condition,
     overlay_frames: &[usize],
-    vertical_scale: Option<f64>,
+    calibration: ActorCalibration,
 ) -> Result<VideoRun> {
+    let vertical_scale = calibration.vertical_scale;
+    if let (Some(z), Some(sigma)) = (calibration.floor, cond.fingertip_floor) {
+        crate::pipeline::FingertipFloor::new((), z, sigma)?;
+    }
     let lengths = [
         scene
             .arm
@@ -1069,8 +1111,9 @@ pub fn run_video_scaled(
                 };
                 workspaces[v].compute(view, scene, cond, frame, background, &mut edges[v])?;
             }
+            let floor = calibration.floor.zip(cond.fingertip_floor);
             let estimate = if let Some(settings) = cond.short_contour_penalty {
-                tracker.step(&ShortContourPenalty {
+                let obs = ShortContourPenalty {
                     settings,
                     long: cond.penalty_long,
                     silhouette: cond
@@ -1080,14 +1123,11 @@ pub fn run_video_scaled(
                     likelihood: &likelihood,
                     scene,
                     edges: &edges,
-                })
+                };
+                step_with_floor(&mut tracker, &obs, floor)
             } else {
-                tracker.step(&SceneObservation::new(
-                    scene,
-                    &geometry,
-                    &likelihood,
-                    &edges,
-                ))
+                let obs = SceneObservation::new(scene, &geometry, &likelihood, &edges);
+                step_with_floor(&mut tracker, &obs, floor)
             };
             let r = FrameResult {
                 best_world: scene.pose_to_world(&estimate.best_pose),
@@ -1263,8 +1303,8 @@ pub fn run_condition(
         .map(|t| {
             let l = lengths.get(&t.subject).copied().unwrap_or(t.lengths);
             let scene = scene_for(model, cond, l)?;
-            let scale = cond.actor_height.factor(&t.subject, &heights, model_height);
-            run_video_scaled(model, &scene, &[Segment::from(t)], cond, &[], scale)
+            let calibration = ActorCalibration::of(cond, &t.subject, &heights, model_height);
+            run_video_calibrated(model, &scene, &[Segment::from(t)], cond, &[], calibration)
         })
         .collect::<Result<_>>()?;
     let res = summarise(cond, model, &runs, t0.elapsed().as_secs_f64())?;
@@ -1749,6 +1789,37 @@ mod tests {
         let given = ActorHeight::Given(vec![("ADL010".into(), 0.9)]);
         assert_eq!(given.factor("ADL010", &rest, -0.34), Some(0.9));
         assert_eq!(given.factor("ADL008", &rest, -0.34), None);
+    }
+
+    /// A condition's calibration of a subject: the factor of its `ActorHeight`, and the floor
+    /// at the subject's rest height only when the condition has a fingertip floor.
+    #[test]
+    fn actor_calibrations() {
+        let rest: BTreeMap<String, f64> = [("ADL008".into(), -0.30)].into_iter().collect();
+        let plain = Condition::monocular("x");
+        assert_eq!(
+            ActorCalibration::of(&plain, "ADL008", &rest, -0.34),
+            ActorCalibration::default()
+        );
+        let both = Condition {
+            actor_height: ActorHeight::RestPose,
+            fingertip_floor: Some(0.01),
+            ..plain.clone()
+        };
+        let c = ActorCalibration::of(&both, "ADL008", &rest, -0.34);
+        assert_eq!(c.floor, Some(-0.30));
+        assert!((c.vertical_scale.unwrap() - 0.30 / 0.34).abs() < 1e-15);
+        let floor = Condition {
+            fingertip_floor: Some(0.01),
+            ..plain
+        };
+        let c = ActorCalibration::of(&floor, "ADL008", &rest, -0.34);
+        assert_eq!((c.vertical_scale, c.floor), (None, Some(-0.30)));
+        // No rest height known: no floor.
+        assert_eq!(
+            ActorCalibration::of(&floor, "ADL010", &rest, -0.34),
+            ActorCalibration::default()
+        );
     }
 
     #[test]

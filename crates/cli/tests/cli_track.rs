@@ -265,6 +265,24 @@ fn bad_input_names_the_frame_with_exit_code_2() {
         String::from_utf8_lossy(&ok.stderr)
     );
     assert!(String::from_utf8_lossy(&ok.stderr).contains("skipped frame 4"));
+    // A negative fingertip floor is a value, not a flag.
+    let floored = track(
+        &f.root,
+        "bad",
+        &[
+            "--csv",
+            "floor.csv",
+            "--skip-bad-frames",
+            "--fingertip-floor",
+            "-0.3",
+        ],
+        None,
+    );
+    assert!(
+        floored.status.success(),
+        "{}",
+        String::from_utf8_lossy(&floored.stderr)
+    );
     assert!(
         !f.root.join("x.csv").exists()
             || std::fs::read_to_string(f.root.join("x.csv"))
@@ -307,6 +325,18 @@ fn bad_input_names_the_frame_with_exit_code_2() {
                 None,
             ),
             &["--height-scale"],
+        );
+    }
+    // So is a bad fingertip floor.
+    for bad in ["x", "inf", "nan"] {
+        expect_input_error(
+            &track(
+                &f.root,
+                "video/frames",
+                &["--csv", "x.csv", "--fingertip-floor", bad],
+                None,
+            ),
+            &["--fingertip-floor"],
         );
     }
     // Keeping the last state's dwell needs a cap.

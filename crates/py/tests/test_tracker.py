@@ -76,6 +76,20 @@ def test_height_scale(model, scene):
             actrack.Tracker(model, scene, height_scale=bad)
 
 
+def test_fingertip_floor(model, scene):
+    """`fingertip_floor` is `track --fingertip-floor` (metres, actor frame): a floor below
+    every pose is the track without it, bit for bit; a height that is not finite is a
+    ValueError naming it."""
+    frames = synthetic_frames(4)
+    base = actrack.Tracker(model, scene, n_particles=64, seed=5).track(frames)
+    low = actrack.Tracker(model, scene, n_particles=64, seed=5, fingertip_floor=-10.0).track(frames)
+    for key in base:
+        np.testing.assert_array_equal(base[key], low[key])
+    for bad in [float("nan"), float("inf")]:
+        with pytest.raises(ValueError, match="fingertip floor"):
+            actrack.Tracker(model, scene, fingertip_floor=bad)
+
+
 def test_track_equals_frame_by_frame_steps(model, scene):
     """`track` overlaps each step with the next frame's edge image; the estimates are those of
     `step` called frame by frame, and frame numbering carries on after it."""

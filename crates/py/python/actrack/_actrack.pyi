@@ -306,6 +306,7 @@ class Tracker:
         n_particles: int = 400,
         seed: int = 0,
         height_scale: float | None = None,
+        fingertip_floor: float | None = None,
     ) -> Tracker: ...
     @property
     def actions(self) -> list[str]: ...
