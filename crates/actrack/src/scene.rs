@@ -567,6 +567,12 @@ impl Scene {
         self.actor.to_world(&Vector3::new(theta[0], theta[1], z))
     }
 
+    /// The table surface's height in the actor frame (metres; negative: below the shoulder),
+    /// the floor of `track --fingertip-floor table`.
+    pub fn table_height(&self) -> f64 {
+        self.actor.from_world(&self.table.placement.origin).z
+    }
+
     /// Maps an actor-frame pose (p, q, r) to world coordinates.
     pub fn pose_to_world(&self, pose: &[f64; 9]) -> [f64; 9] {
         let mut out = [0.0; 9];
@@ -899,5 +905,10 @@ origin = [0.1, 0.0, 1.1]
             let (u, v) = s.cameras[0].project(&p).unwrap();
             assert!(s.cameras[0].in_image(u, v));
         }
+        // The table surface in the actor frame: the world heights' difference (the actor's
+        // heading turns about z only).
+        let want = s.table.placement.origin.z - s.actor.origin.z;
+        assert!((s.table_height() - want).abs() < 1e-12);
+        assert!(s.table_height() < 0.0, "{}", s.table_height());
     }
 }

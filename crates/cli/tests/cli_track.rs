@@ -283,6 +283,24 @@ fn bad_input_names_the_frame_with_exit_code_2() {
         "{}",
         String::from_utf8_lossy(&floored.stderr)
     );
+    // So is `table`, the scene's table surface.
+    let on_table = track(
+        &f.root,
+        "bad",
+        &[
+            "--csv",
+            "floor.csv",
+            "--skip-bad-frames",
+            "--fingertip-floor",
+            "table",
+        ],
+        None,
+    );
+    assert!(
+        on_table.status.success(),
+        "{}",
+        String::from_utf8_lossy(&on_table.stderr)
+    );
     assert!(
         !f.root.join("x.csv").exists()
             || std::fs::read_to_string(f.root.join("x.csv"))
@@ -328,7 +346,7 @@ fn bad_input_names_the_frame_with_exit_code_2() {
         );
     }
     // So is a bad fingertip floor.
-    for bad in ["x", "inf", "nan"] {
+    for bad in ["x", "inf", "nan", "tables"] {
         expect_input_error(
             &track(
                 &f.root,

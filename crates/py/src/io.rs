@@ -296,6 +296,13 @@ impl PyScene {
         (vec_to_py(py, c.to_vec()), vec_to_py(py, h.to_vec()))
     }
 
+    /// The table surface's height in the actor frame (metres; negative: below the shoulder), a
+    /// floor for `Tracker(..., fingertip_floor=...)`.
+    #[getter]
+    fn table_height(&self) -> f64 {
+        self.inner.table_height()
+    }
+
     /// Project world points (N, 3) into camera `camera`: (N, 2) pixels, NaN for points behind
     /// the camera.
     #[pyo3(signature = (points, *, camera=0))]

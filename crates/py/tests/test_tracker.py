@@ -88,6 +88,12 @@ def test_fingertip_floor(model, scene):
     for bad in [float("nan"), float("inf")]:
         with pytest.raises(ValueError, match="fingertip floor"):
             actrack.Tracker(model, scene, fingertip_floor=bad)
+    # The scene's table surface, below the shoulder, is a valid floor (`--fingertip-floor table`).
+    assert scene.table_height < 0.0
+    on_table = actrack.Tracker(
+        model, scene, n_particles=64, seed=5, fingertip_floor=scene.table_height
+    ).track(frames)
+    assert np.isfinite(on_table["best_pose"]).all()
 
 
 def test_track_equals_frame_by_frame_steps(model, scene):

@@ -97,21 +97,37 @@ pub struct Args {
     pub height_scale: Option<f64>,
     /// A soft floor under the fingertip at height Z (metres, actor frame: negative, below the
     /// shoulder; the actor's fingertip height with the hand at rest on the table, e.g.
-    /// `--fingertip-floor=-0.30`): poses whose fingertip lies d below it lose ½(d/1 cm)² of
-    /// log-likelihood, since the hand cannot go through the table. Default: no floor.
-    #[arg(long, value_name = "Z", allow_hyphen_values = true, value_parser = parse_floor)]
-    pub fingertip_floor: Option<f64>,
+    /// `--fingertip-floor=-0.30`), or `table` for the scene's table surface: poses whose
+    /// fingertip lies d below it lose ½(d/1 cm)² of log-likelihood, since the hand cannot go
+    /// through the table. Default: no floor.
+    #[arg(long, value_name = "Z|table", allow_hyphen_values = true, value_parser = parse_floor)]
+    pub fingertip_floor: Option<FloorArg>,
 }
 
-/// `--fingertip-floor Z`: a finite height in metres.
-fn parse_floor(s: &str) -> Result<f64, String> {
+/// `--fingertip-floor`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum FloorArg {
+    /// The scene's table surface.
+    Table,
+    /// A height in metres, actor frame.
+    Height(f64),
+}
+
+/// `--fingertip-floor Z|table`: `table` or a finite height in metres.
+fn parse_floor(s: &str) -> Result<FloorArg, String> {
+    if s.trim() == "table" {
+        return Ok(FloorArg::Table);
+    }
     let v: f64 = s.trim().parse().map_err(|_| {
-        format!("`{s}` is not a number (expected a height in metres, actor frame, e.g. -0.30)")
+        format!(
+            "`{s}` is neither `table` nor a number (expected a height in metres, actor frame, \
+             e.g. -0.30)"
+        )
     })?;
     if !v.is_finite() {
         return Err(format!("needs a finite height in metres, got {v}"));
     }
-    Ok(v)
+    Ok(FloorArg::Height(v))
 }
 
 /// `--height-scale S`: finite, S > 0.
@@ -216,7 +232,10 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
             keep_last: args.keep_last_dwell,
         }),
         height_scale: args.height_scale,
-        fingertip_floor: args.fingertip_floor,
+        fingertip_floor: args.fingertip_floor.map(|f| match f {
+            FloorArg::Table => scene.table_height(),
+            FloorArg::Height(z) => z,
+        }),
     };
     let outputs = TrackOutputs {
         mcap: args.output.clone(),
