@@ -214,6 +214,10 @@ pub struct TrackOptions {
     /// the actor's fingertip at rest on the table), with σ = [`FINGERTIP_FLOOR_SIGMA`]; `None`:
     /// no floor.
     pub fingertip_floor: Option<f64>,
+    /// The fraction ε ∈ (0, 1) of the particles split evenly over the actions as a floor
+    /// ([`actrack_pf::ActionBalance::Mixture`]); `None`: the default
+    /// [`actrack_pf::DEFAULT_ACTION_FLOOR`].
+    pub action_floor: Option<f64>,
 }
 
 impl Default for TrackOptions {
@@ -227,6 +231,7 @@ impl Default for TrackOptions {
             dwell_cap: None,
             height_scale: None,
             fingertip_floor: None,
+            action_floor: None,
         }
     }
 }
@@ -375,6 +380,9 @@ impl Pipeline {
             .particles(opts.particles)
             .seed(opts.seed)
             .speed_range(opts.speed_range);
+        if let Some(f) = opts.action_floor {
+            builder = builder.action_balance(actrack_pf::ActionBalance::Mixture(f));
+        }
         if opts.theta_prior == ThetaPrior::Training {
             builder = builder.action_regions(training_theta_regions(
                 model,
@@ -878,6 +886,7 @@ mod tests {
         dwell_cap: None,
         height_scale: None,
         fingertip_floor: None,
+        action_floor: None,
     };
 
     /// The best pose of every frame of `frames` (first view) tracked with `track`.
@@ -1077,6 +1086,38 @@ mod tests {
             .err()
             .unwrap();
         assert!(e.to_string().contains("fingertip floor"), "{e}");
+    }
+
+    /// The default action floor is the tracker's (the same track bit for bit), another floor
+    /// changes the track, and one outside (0, 1) is an error naming it.
+    #[test]
+    #[allow(clippy::float_cmp)] // bit-identical estimates are the claim
+    fn action_floor_sets_the_mixture_floor() {
+        let prep = small(6, 5);
+        let frames = first_view_frames(&prep);
+        let run = |action_floor: Option<f64>| {
+            best_poses(
+                &prep,
+                &frames,
+                &TrackOptions {
+                    action_floor,
+                    ..SMALL_TRACK
+                },
+            )
+        };
+        let base = run(None);
+        assert_eq!(run(Some(actrack_pf::DEFAULT_ACTION_FLOOR)), base);
+        assert_ne!(run(Some(0.9)), base);
+        for bad in [0.0, 1.0, -0.5, f64::NAN] {
+            let track = TrackOptions {
+                action_floor: Some(bad),
+                ..TrackOptions::default()
+            };
+            let e = Pipeline::new(&prep.model, &prep.scene, &track)
+                .err()
+                .unwrap();
+            assert!(e.to_string().contains("particle floor"), "{e}");
+        }
     }
 
     /// A frame that does not fit the camera is an error naming it, and leaves nothing primed.

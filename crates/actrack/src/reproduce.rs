@@ -334,6 +334,9 @@ pub struct Condition {
     /// paper): its σ (metres), the floor at the subject's rest height ([`rest_heights`]);
     /// `None`: no floor.
     pub fingertip_floor: Option<f64>,
+    /// The fraction ε of the particles split evenly over the actions as a floor
+    /// ([`actrack_pf::ActionBalance::Mixture`]; default [`actrack_pf::DEFAULT_ACTION_FLOOR`]).
+    pub action_floor: f64,
 }
 
 /// How a condition adapts the models' heights to a test subject: the models' vertical outputs
@@ -399,6 +402,7 @@ impl Condition {
             actor_height: ActorHeight::Models,
             pose_noise: 1.0,
             fingertip_floor: None,
+            action_floor: actrack_pf::DEFAULT_ACTION_FLOOR,
         }
     }
 
@@ -498,7 +502,8 @@ pub fn tracker_config(model: &ActionModel, cond: &Condition) -> Result<TrackerCo
         .speed_range(cond.speed_range)
         .pose_sampling(cond.pose_sampling)
         .median_window(cond.median_window)
-        .phase_jump(cond.phase_jump);
+        .phase_jump(cond.phase_jump)
+        .action_balance(actrack_pf::ActionBalance::Mixture(cond.action_floor));
     if cond.per_action_theta {
         b = b.action_regions(training_theta_regions(model, REGION_PAD, (centre, half)));
     }

@@ -357,6 +357,18 @@ fn bad_input_names_the_frame_with_exit_code_2() {
             &["--fingertip-floor"],
         );
     }
+    // So is a bad action floor.
+    for bad in ["0", "1", "x", "nan"] {
+        expect_input_error(
+            &track(
+                &f.root,
+                "video/frames",
+                &["--csv", "x.csv", "--action-floor", bad],
+                None,
+            ),
+            &["--action-floor"],
+        );
+    }
     // Keeping the last state's dwell needs a cap.
     expect_input_error(
         &track(

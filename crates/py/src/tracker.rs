@@ -176,7 +176,7 @@ impl PyTracker {
 #[pymethods]
 impl PyTracker {
     #[new]
-    #[pyo3(signature = (model, scene, *, n_particles=400, seed=0, height_scale=None, fingertip_floor=None))]
+    #[pyo3(signature = (model, scene, *, n_particles=400, seed=0, height_scale=None, fingertip_floor=None, action_floor=None))]
     fn new(
         model: PyRef<'_, PyActionModel>,
         scene: PyRef<'_, PyScene>,
@@ -184,12 +184,14 @@ impl PyTracker {
         seed: u64,
         height_scale: Option<f64>,
         fingertip_floor: Option<f64>,
+        action_floor: Option<f64>,
     ) -> PyResult<Self> {
         let opts = TrackOptions {
             particles: n_particles,
             seed,
             height_scale,
             fingertip_floor,
+            action_floor,
             ..TrackOptions::default()
         };
         let pipeline =

@@ -96,6 +96,19 @@ def test_fingertip_floor(model, scene):
     assert np.isfinite(on_table["best_pose"]).all()
 
 
+def test_action_floor(model, scene):
+    """`action_floor` is `track --action-floor` (default 0.25, the same track bit for bit); a
+    floor outside (0, 1) is a ValueError naming it."""
+    frames = synthetic_frames(4)
+    base = actrack.Tracker(model, scene, n_particles=64, seed=5).track(frames)
+    same = actrack.Tracker(model, scene, n_particles=64, seed=5, action_floor=0.25).track(frames)
+    for key in base:
+        np.testing.assert_array_equal(base[key], same[key])
+    for bad in [0.0, 1.0, float("nan")]:
+        with pytest.raises(ValueError, match="particle floor"):
+            actrack.Tracker(model, scene, action_floor=bad)
+
+
 def test_track_equals_frame_by_frame_steps(model, scene):
     """`track` overlaps each step with the next frame's edge image; the estimates are those of
     `step` called frame by frame, and frame numbering carries on after it."""

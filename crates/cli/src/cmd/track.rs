@@ -102,6 +102,24 @@ pub struct Args {
     /// through the table. Default: no floor.
     #[arg(long, value_name = "Z|table", allow_hyphen_values = true, value_parser = parse_floor)]
     pub fingertip_floor: Option<FloorArg>,
+    /// The fraction F ∈ (0, 1) of the particles split evenly over the actions as a floor: the
+    /// filter resamples within each action and every action keeps at least F·M/|actions|
+    /// particles, however improbable it has become (default 0.25). A larger floor keeps the
+    /// less probable actions tracked, so that when the evidence turns they are in phase.
+    #[arg(long, value_name = "F", value_parser = parse_action_floor)]
+    pub action_floor: Option<f64>,
+}
+
+/// `--action-floor F`: 0 < F < 1.
+fn parse_action_floor(s: &str) -> Result<f64, String> {
+    let f: f64 = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{s}` is not a number (expected 0 < F < 1, e.g. 0.9)"))?;
+    if !(f > 0.0 && f < 1.0) {
+        return Err(format!("needs 0 < F < 1, got {f}"));
+    }
+    Ok(f)
 }
 
 /// `--fingertip-floor`.
@@ -236,6 +254,7 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
             FloorArg::Table => scene.table_height(),
             FloorArg::Height(z) => z,
         }),
+        action_floor: args.action_floor,
     };
     let outputs = TrackOutputs {
         mcap: args.output.clone(),

@@ -309,6 +309,7 @@ class Tracker:
         seed: int = 0,
         height_scale: float | None = None,
         fingertip_floor: float | None = None,
+        action_floor: float | None = None,
     ) -> Tracker: ...
     @property
     def actions(self) -> list[str]: ...
