@@ -899,6 +899,14 @@ mod tests {
             .collect()
     }
 
+    /// Asserts that `track` cannot build a pipeline, with an error naming `needle`.
+    fn assert_rejected(prep: &Prepared, track: &TrackOptions, needle: &str) {
+        let e = Pipeline::new(&prep.model, &prep.scene, track)
+            .err()
+            .unwrap();
+        assert!(e.to_string().contains(needle), "{e}");
+    }
+
     /// `max_stay = 1` is the models' own dwell times (the same track bit for bit), a cap below
     /// the models' self-transitions changes the track, keeping the last states' dwells leaves
     /// those states as trained and caps the rest, and a cap outside (0, 1] is an error.
@@ -952,10 +960,7 @@ mod tests {
                 dwell_cap: Some(DwellCap::all(bad)),
                 ..TrackOptions::default()
             };
-            let e = Pipeline::new(&prep.model, &prep.scene, &track)
-                .err()
-                .unwrap();
-            assert!(e.to_string().contains("max_stay"), "{e}");
+            assert_rejected(&prep, &track, "max_stay");
         }
     }
 
@@ -997,10 +1002,7 @@ mod tests {
                 height_scale: Some(bad),
                 ..TrackOptions::default()
             };
-            let e = Pipeline::new(&prep.model, &prep.scene, &track)
-                .err()
-                .unwrap();
-            assert!(e.to_string().contains("height scale"), "{e}");
+            assert_rejected(&prep, &track, "height scale");
         }
     }
 
@@ -1050,9 +1052,9 @@ mod tests {
         }
     }
 
-    /// A floor far below every pose is the track without it, bit for bit; a floor above the
-    /// arm's reach moves the track (the fingertip is pushed up); a floor that is not finite is
-    /// an error.
+    /// A floor far below every pose is the track without it, bit for bit; a floor 5 cm above
+    /// the lowest fingertip of the track without it moves the track and raises that lowest
+    /// fingertip; a floor that is not finite is an error.
     #[test]
     #[allow(clippy::float_cmp)] // bit-identical estimates are the claim
     fn fingertip_floor_moves_the_track_only_from_below() {
@@ -1082,10 +1084,7 @@ mod tests {
             fingertip_floor: Some(f64::NAN),
             ..TrackOptions::default()
         };
-        let e = Pipeline::new(&prep.model, &prep.scene, &track)
-            .err()
-            .unwrap();
-        assert!(e.to_string().contains("fingertip floor"), "{e}");
+        assert_rejected(&prep, &track, "fingertip floor");
     }
 
     /// The default action floor is the tracker's (the same track bit for bit), another floor
@@ -1113,10 +1112,7 @@ mod tests {
                 action_floor: Some(bad),
                 ..TrackOptions::default()
             };
-            let e = Pipeline::new(&prep.model, &prep.scene, &track)
-                .err()
-                .unwrap();
-            assert!(e.to_string().contains("particle floor"), "{e}");
+            assert_rejected(&prep, &track, "particle floor");
         }
     }
 

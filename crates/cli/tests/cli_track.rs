@@ -265,42 +265,27 @@ fn bad_input_names_the_frame_with_exit_code_2() {
         String::from_utf8_lossy(&ok.stderr)
     );
     assert!(String::from_utf8_lossy(&ok.stderr).contains("skipped frame 4"));
-    // A negative fingertip floor is a value, not a flag.
-    let floored = track(
-        &f.root,
-        "bad",
-        &[
-            "--csv",
-            "floor.csv",
-            "--skip-bad-frames",
-            "--fingertip-floor",
-            "-0.3",
-        ],
-        None,
-    );
-    assert!(
-        floored.status.success(),
-        "{}",
-        String::from_utf8_lossy(&floored.stderr)
-    );
-    // So is `table`, the scene's table surface.
-    let on_table = track(
-        &f.root,
-        "bad",
-        &[
-            "--csv",
-            "floor.csv",
-            "--skip-bad-frames",
-            "--fingertip-floor",
-            "table",
-        ],
-        None,
-    );
-    assert!(
-        on_table.status.success(),
-        "{}",
-        String::from_utf8_lossy(&on_table.stderr)
-    );
+    // A negative fingertip floor is a value, not a flag, and so is `table` (the scene's table
+    // surface).
+    for floor in ["-0.3", "table"] {
+        let floored = track(
+            &f.root,
+            "bad",
+            &[
+                "--csv",
+                "floor.csv",
+                "--skip-bad-frames",
+                "--fingertip-floor",
+                floor,
+            ],
+            None,
+        );
+        assert!(
+            floored.status.success(),
+            "{floor}: {}",
+            String::from_utf8_lossy(&floored.stderr)
+        );
+    }
     assert!(
         !f.root.join("x.csv").exists()
             || std::fs::read_to_string(f.root.join("x.csv"))
@@ -309,65 +294,26 @@ fn bad_input_names_the_frame_with_exit_code_2() {
                 .count()
                 == 5
     );
-    // A bad speed range is a usage error.
-    for bad in ["2,1", "0.8", "a,1"] {
-        expect_input_error(
-            &track(
-                &f.root,
-                "video/frames",
-                &["--csv", "x.csv", "--speed-range", bad],
-                None,
-            ),
-            &["--speed-range"],
-        );
-    }
-    // So is a bad dwell cap.
-    for bad in ["0", "1.5", "x", "nan"] {
-        expect_input_error(
-            &track(
-                &f.root,
-                "video/frames",
-                &["--csv", "x.csv", "--max-stay", bad],
-                None,
-            ),
-            &["--max-stay"],
-        );
-    }
-    // So is a bad height scale.
-    for bad in ["0", "x", "inf", "nan"] {
-        expect_input_error(
-            &track(
-                &f.root,
-                "video/frames",
-                &["--csv", "x.csv", "--height-scale", bad],
-                None,
-            ),
-            &["--height-scale"],
-        );
-    }
-    // So is a bad fingertip floor.
-    for bad in ["x", "inf", "nan", "tables"] {
-        expect_input_error(
-            &track(
-                &f.root,
-                "video/frames",
-                &["--csv", "x.csv", "--fingertip-floor", bad],
-                None,
-            ),
-            &["--fingertip-floor"],
-        );
-    }
-    // So is a bad action floor.
-    for bad in ["0", "1", "x", "nan"] {
-        expect_input_error(
-            &track(
-                &f.root,
-                "video/frames",
-                &["--csv", "x.csv", "--action-floor", bad],
-                None,
-            ),
-            &["--action-floor"],
-        );
+    // A bad value of an option is a usage error naming the option.
+    let bad_values: [(&str, &[&str]); 5] = [
+        ("--speed-range", &["2,1", "0.8", "a,1"]),
+        ("--max-stay", &["0", "1.5", "x", "nan"]),
+        ("--height-scale", &["0", "x", "inf", "nan"]),
+        ("--fingertip-floor", &["x", "inf", "nan", "tables"]),
+        ("--action-floor", &["0", "1", "x", "nan"]),
+    ];
+    for (option, values) in bad_values {
+        for bad in values {
+            expect_input_error(
+                &track(
+                    &f.root,
+                    "video/frames",
+                    &["--csv", "x.csv", option, bad],
+                    None,
+                ),
+                &[option],
+            );
+        }
     }
     // Keeping the last state's dwell needs a cap.
     expect_input_error(
