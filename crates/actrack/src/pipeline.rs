@@ -144,34 +144,43 @@ pub const FINGERTIP_FLOOR_SIGMA: f64 = 0.01;
 #[derive(Clone, Copy, Debug)]
 pub struct FingertipFloor<O> {
     inner: O,
-    floor: f64,
+    floor: Floor,
+}
+
+/// The floor of a [`FingertipFloor`]: its height z₀ (metres, actor frame) and softness σ
+/// (metres), validated.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Floor {
+    z: f64,
     sigma: f64,
 }
 
-impl<O> FingertipFloor<O> {
-    /// `inner` with the floor at z₀ = `floor` (metres, actor frame) and softness `sigma`
-    /// (metres, > 0).
+impl Floor {
+    /// The floor at z₀ = `z` with softness `sigma` (> 0).
     ///
     /// # Errors
-    /// When `floor` is not finite or `sigma` is not positive and finite.
-    pub fn new(inner: O, floor: f64, sigma: f64) -> Result<Self> {
-        if !(floor.is_finite() && sigma.is_finite() && sigma > 0.0) {
+    /// When `z` is not finite or `sigma` is not positive and finite.
+    pub fn new(z: f64, sigma: f64) -> Result<Self> {
+        if !(z.is_finite() && sigma.is_finite() && sigma > 0.0) {
             return Err(Error::Config(format!(
                 "fingertip floor: needs a finite height (metres, actor frame) and a positive \
-                 σ, got {floor} and {sigma}"
+                 σ, got {z} and {sigma}"
             )));
         }
-        Ok(Self {
-            inner,
-            floor,
-            sigma,
-        })
+        Ok(Self { z, sigma })
     }
 
     /// The log-likelihood a pose loses to the floor (0 when its fingertip is on or above it).
     pub fn penalty(&self, pose: &[f64; 9]) -> f64 {
-        let below = (self.floor - pose[8]).max(0.0) / self.sigma;
+        let below = (self.z - pose[8]).max(0.0) / self.sigma;
         0.5 * below * below
+    }
+}
+
+impl<O> FingertipFloor<O> {
+    /// `inner` under `floor`.
+    pub fn new(inner: O, floor: Floor) -> Self {
+        Self { inner, floor }
     }
 }
 
@@ -183,7 +192,7 @@ impl<O: ObservationModel> ObservationModel for FingertipFloor<O> {
     fn log_likelihoods(&self, poses: &[[f64; 9]], out: &mut [f64]) {
         self.inner.log_likelihoods(poses, out);
         for (o, p) in out.iter_mut().zip(poses) {
-            *o -= self.penalty(p);
+            *o -= self.floor.penalty(p);
         }
     }
 }
@@ -315,8 +324,8 @@ pub struct Pipeline {
     /// Wall seconds of the last step's edge images + filter step (decoding excluded).
     step_seconds: f64,
     names: Vec<String>,
-    /// z₀ of the fingertip floor, if any ([`TrackOptions::fingertip_floor`]).
-    floor: Option<f64>,
+    /// The fingertip floor, if any ([`TrackOptions::fingertip_floor`]).
+    floor: Option<Floor>,
 }
 
 /// Where a frame's edge images are computed before the filter step that scores them: the
@@ -393,9 +402,10 @@ impl Pipeline {
         let config = builder
             .build()
             .map_err(|e| Error::Config(format!("tracker: {e}")))?;
-        if let Some(z) = opts.fingertip_floor {
-            FingertipFloor::new((), z, FINGERTIP_FLOOR_SIGMA)?;
-        }
+        let floor = opts
+            .fingertip_floor
+            .map(|z| Floor::new(z, FINGERTIP_FLOOR_SIGMA))
+            .transpose()?;
         let names: Vec<String> = model.actions.iter().map(|a| a.name.clone()).collect();
         let phmms = model.tracking_phmms_scaled(opts.dwell_cap, opts.height_scale)?;
         let tracker =
@@ -420,7 +430,7 @@ impl Pipeline {
             edge_seconds: 0.0,
             step_seconds: 0.0,
             names,
-            floor: opts.fingertip_floor,
+            floor,
         })
     }
 
@@ -535,7 +545,7 @@ fn filter(
     likelihood: &LikelihoodModel,
     tracker: &mut Tracker,
     edges: &[EdgeImage],
-    floor: Option<f64>,
+    floor: Option<Floor>,
 ) -> FrameResult {
     let obs = SceneObservation {
         scene,
@@ -543,7 +553,7 @@ fn filter(
         likelihood,
         edges,
     };
-    let estimate = step_with_floor(tracker, &obs, floor.map(|z| (z, FINGERTIP_FLOOR_SIGMA)));
+    let estimate = step_with_floor(tracker, &obs, floor);
     let best_world = scene.pose_to_world(&estimate.best_pose);
     let smoothed_world = scene.pose_to_world(&estimate.smoothed_pose);
     let theta_world = scene.theta_to_world(estimate.theta_mean);
@@ -555,15 +565,14 @@ fn filter(
     }
 }
 
-/// One filter step on `obs`, under a [`FingertipFloor`] (z₀, σ) when one is given (validated
-/// by the caller: an invalid floor is ignored).
+/// One filter step on `obs`, under a [`FingertipFloor`] when a floor is given.
 pub fn step_with_floor<O: ObservationModel + ?Sized>(
     tracker: &mut Tracker,
     obs: &O,
-    floor: Option<(f64, f64)>,
+    floor: Option<Floor>,
 ) -> Estimate {
-    match floor.and_then(|(z, sigma)| FingertipFloor::new(obs, z, sigma).ok()) {
-        Some(floored) => tracker.step(&floored),
+    match floor {
+        Some(floor) => tracker.step(&FingertipFloor::new(obs, floor)),
         None => tracker.step(obs),
     }
 }
@@ -889,9 +898,16 @@ mod tests {
         action_floor: None,
     };
 
-    /// The best pose of every frame of `frames` (first view) tracked with `track`.
-    fn best_poses(prep: &Prepared, frames: &[RgbImage], track: &TrackOptions) -> Vec<[f64; 9]> {
-        let mut p = Pipeline::new(&prep.model, &prep.scene, track).unwrap();
+    /// The best pose of every frame of `frames` (first view) tracked with [`SMALL_TRACK`]
+    /// changed by `set`.
+    fn best_poses(
+        prep: &Prepared,
+        frames: &[RgbImage],
+        set: impl FnOnce(&mut TrackOptions),
+    ) -> Vec<[f64; 9]> {
+        let mut track = SMALL_TRACK;
+        set(&mut track);
+        let mut p = Pipeline::new(&prep.model, &prep.scene, &track).unwrap();
         frames
             .iter()
             .enumerate()
@@ -899,9 +915,12 @@ mod tests {
             .collect()
     }
 
-    /// Asserts that `track` cannot build a pipeline, with an error naming `needle`.
-    fn assert_rejected(prep: &Prepared, track: &TrackOptions, needle: &str) {
-        let e = Pipeline::new(&prep.model, &prep.scene, track)
+    /// Asserts that the default options changed by `set` cannot build a pipeline, with an
+    /// error naming `needle`.
+    fn assert_rejected(prep: &Prepared, set: impl FnOnce(&mut TrackOptions), needle: &str) {
+        let mut track = TrackOptions::default();
+        set(&mut track);
+        let e = Pipeline::new(&prep.model, &prep.scene, &track)
             .err()
             .unwrap();
         assert!(e.to_string().contains(needle), "{e}");
@@ -915,18 +934,13 @@ mod tests {
     fn max_stay_caps_the_dwell_times() {
         let prep = small(6, 5);
         let frames = first_view_frames(&prep);
-        let run = |max_stay: Option<f64>, keep_last_dwell: bool| {
-            best_poses(
-                &prep,
-                &frames,
-                &TrackOptions {
-                    dwell_cap: max_stay.map(|max_stay| DwellCap {
-                        max_stay,
-                        keep_last: keep_last_dwell,
-                    }),
-                    ..SMALL_TRACK
-                },
-            )
+        let run = |max_stay: Option<f64>, keep_last: bool| {
+            best_poses(&prep, &frames, |o| {
+                o.dwell_cap = max_stay.map(|max_stay| DwellCap {
+                    max_stay,
+                    keep_last,
+                });
+            })
         };
         let base = run(None, false);
         assert_eq!(run(Some(1.0), false), base);
@@ -956,11 +970,11 @@ mod tests {
             }
         }
         for bad in [0.0, 1.5, f64::NAN] {
-            let track = TrackOptions {
-                dwell_cap: Some(DwellCap::all(bad)),
-                ..TrackOptions::default()
-            };
-            assert_rejected(&prep, &track, "max_stay");
+            assert_rejected(
+                &prep,
+                |o| o.dwell_cap = Some(DwellCap::all(bad)),
+                "max_stay",
+            );
         }
     }
 
@@ -973,16 +987,7 @@ mod tests {
     fn height_scale_scales_the_models_heights() {
         let prep = small(6, 5);
         let frames = first_view_frames(&prep);
-        let run = |height_scale: Option<f64>| {
-            best_poses(
-                &prep,
-                &frames,
-                &TrackOptions {
-                    height_scale,
-                    ..SMALL_TRACK
-                },
-            )
-        };
+        let run = |x: Option<f64>| best_poses(&prep, &frames, |o| o.height_scale = x);
         let base = run(None);
         assert_eq!(run(Some(1.0)), base);
         assert_ne!(run(Some(0.8)), base);
@@ -998,11 +1003,7 @@ mod tests {
         let h = prep.model.rest_height();
         assert!(h.is_finite() && h < 0.0, "{h}");
         for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
-            let track = TrackOptions {
-                height_scale: Some(bad),
-                ..TrackOptions::default()
-            };
-            assert_rejected(&prep, &track, "height scale");
+            assert_rejected(&prep, |o| o.height_scale = Some(bad), "height scale");
         }
     }
 
@@ -1021,7 +1022,7 @@ mod tests {
                 }
             }
         }
-        let floor = FingertipFloor::new(Linear, -0.3, 0.01).unwrap();
+        let floor = FingertipFloor::new(Linear, Floor::new(-0.3, 0.01).unwrap());
         let pose = |y: f64, z: f64| [0.0, 0.0, 0.0, 0.1, 0.2, -0.2, 0.0, y, z];
         let poses = [
             pose(0.4, -0.25),
@@ -1047,7 +1048,7 @@ mod tests {
             (-0.3, -1.0),
             (-0.3, f64::INFINITY),
         ] {
-            let e = FingertipFloor::new(Linear, z, sigma).err().unwrap();
+            let e = Floor::new(z, sigma).err().unwrap();
             assert!(e.to_string().contains("fingertip floor"), "{e}");
         }
     }
@@ -1060,16 +1061,7 @@ mod tests {
     fn fingertip_floor_moves_the_track_only_from_below() {
         let prep = small(6, 5);
         let frames = first_view_frames(&prep);
-        let run = |fingertip_floor: Option<f64>| {
-            best_poses(
-                &prep,
-                &frames,
-                &TrackOptions {
-                    fingertip_floor,
-                    ..SMALL_TRACK
-                },
-            )
-        };
+        let run = |x: Option<f64>| best_poses(&prep, &frames, |o| o.fingertip_floor = x);
         let base = run(None);
         assert_eq!(run(Some(-10.0)), base);
         let low = base.iter().map(|p| p[8]).fold(f64::INFINITY, f64::min);
@@ -1080,11 +1072,11 @@ mod tests {
             lowest > low,
             "lowest fingertip {lowest} vs {low} without the floor"
         );
-        let track = TrackOptions {
-            fingertip_floor: Some(f64::NAN),
-            ..TrackOptions::default()
-        };
-        assert_rejected(&prep, &track, "fingertip floor");
+        assert_rejected(
+            &prep,
+            |o| o.fingertip_floor = Some(f64::NAN),
+            "fingertip floor",
+        );
     }
 
     /// The default action floor is the tracker's (the same track bit for bit), another floor
@@ -1094,25 +1086,12 @@ mod tests {
     fn action_floor_sets_the_mixture_floor() {
         let prep = small(6, 5);
         let frames = first_view_frames(&prep);
-        let run = |action_floor: Option<f64>| {
-            best_poses(
-                &prep,
-                &frames,
-                &TrackOptions {
-                    action_floor,
-                    ..SMALL_TRACK
-                },
-            )
-        };
+        let run = |x: Option<f64>| best_poses(&prep, &frames, |o| o.action_floor = x);
         let base = run(None);
         assert_eq!(run(Some(actrack_pf::DEFAULT_ACTION_FLOOR)), base);
         assert_ne!(run(Some(0.9)), base);
         for bad in [0.0, 1.0, -0.5, f64::NAN] {
-            let track = TrackOptions {
-                action_floor: Some(bad),
-                ..TrackOptions::default()
-            };
-            assert_rejected(&prep, &track, "particle floor");
+            assert_rejected(&prep, |o| o.action_floor = Some(bad), "particle floor");
         }
     }
 

@@ -986,9 +986,10 @@ pub fn run_video_calibrated(
     calibration: ActorCalibration,
 ) -> Result<VideoRun> {
     let vertical_scale = calibration.vertical_scale;
-    if let (Some(z), Some(sigma)) = (calibration.floor, cond.fingertip_floor) {
-        crate::pipeline::FingertipFloor::new((), z, sigma)?;
-    }
+    let floor = match (calibration.floor, cond.fingertip_floor) {
+        (Some(z), Some(sigma)) => Some(crate::pipeline::Floor::new(z, sigma)?),
+        _ => None,
+    };
     let lengths = [
         scene
             .arm
@@ -1116,7 +1117,6 @@ pub fn run_video_calibrated(
                 };
                 workspaces[v].compute(view, scene, cond, frame, background, &mut edges[v])?;
             }
-            let floor = calibration.floor.zip(cond.fingertip_floor);
             let estimate = if let Some(settings) = cond.short_contour_penalty {
                 let obs = ShortContourPenalty {
                     settings,

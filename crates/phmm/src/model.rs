@@ -567,6 +567,16 @@ impl Phmm {
             .iter()
             .map(|s| DMatrix::from_fn(m, m, |r, c| s[(dims[r], dims[c])]))
             .collect();
+        self.with_outputs(mean_bias, weights, covariances)
+    }
+
+    /// This model with other means and covariances (transitions, exits and the rest kept).
+    fn with_outputs(
+        &self,
+        mean_bias: Vec<DVector<f64>>,
+        weights: Vec<DMatrix<f64>>,
+        covariances: Vec<DMatrix<f64>>,
+    ) -> Result<Phmm, PhmmError> {
         self.rebuilt(
             self.trans.clone(),
             self.exit.clone(),
@@ -634,13 +644,7 @@ impl Phmm {
             .iter()
             .map(|s| DMatrix::from_fn(self.d, self.d, |r, c| scale[r] * s[(r, c)] * scale[c]))
             .collect();
-        self.rebuilt(
-            self.trans.clone(),
-            self.exit.clone(),
-            mean_bias,
-            weights,
-            covariances,
-        )
+        self.with_outputs(mean_bias, weights, covariances)
     }
 
     /// The model with every state's covariance multiplied by `c` (means, transitions and θ
@@ -654,13 +658,7 @@ impl Phmm {
             });
         }
         let covariances = self.covariances.iter().map(|s| s * c).collect();
-        self.rebuilt(
-            self.trans.clone(),
-            self.exit.clone(),
-            self.mean_bias.clone(),
-            self.weights.clone(),
-            covariances,
-        )
+        self.with_outputs(self.mean_bias.clone(), self.weights.clone(), covariances)
     }
 
     /// The model with every self-transition capped at `max_stay`: a state i with
