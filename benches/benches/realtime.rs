@@ -11,8 +11,10 @@
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
-use actrack::bench::{BenchOptions, Prepared, Runner, prepare};
-use actrack_render::ContourMethod;
+use actrack::Session;
+use actrack::bench::{BenchOptions, Prepared, prepare};
+use actrack::config::Contour;
+use actrack_render::ImageView;
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 
 const BUDGET_MS: f64 = 1000.0 / 30.0;
@@ -48,22 +50,22 @@ fn realtime(c: &mut Criterion) {
                 ..BenchOptions::default()
             };
             let prep: Prepared = prepare(&base, FRAMES).expect("synthetic sequence");
-            for contour in [ContourMethod::Analytic, ContourMethod::Raster] {
+            for contour in [Contour::Analytic, Contour::Raster] {
                 for &particles in counts {
-                    let opts = BenchOptions {
-                        particles,
-                        contour,
-                        ..base.clone()
-                    };
+                    // The default configuration (what `track` runs) with this M and contour.
+                    let mut config = base.config.clone();
+                    config.filter.particles = particles;
+                    config.observation.contour = contour;
                     let name = format!(
                         "{w}x{h}/{views}view/{}",
-                        if contour == ContourMethod::Raster {
+                        if contour == Contour::Raster {
                             "raster"
                         } else {
                             "analytic"
                         }
                     );
-                    let mut runner = Runner::new(&prep, &opts).expect("runner");
+                    let mut session =
+                        Session::new(&prep.model, &prep.scene, &config).expect("session");
                     let mut t = 0usize;
                     let mut total = Duration::ZERO;
                     let mut n = 0u64;
@@ -74,9 +76,15 @@ fn realtime(c: &mut Criterion) {
                             b.iter_custom(|iters| {
                                 let start = Instant::now();
                                 for _ in 0..iters {
-                                    runner
-                                        .step(&prep.frames[t % prep.frames.len()])
-                                        .expect("step");
+                                    let frame = &prep.frames[t % prep.frames.len()];
+                                    let views: Vec<ImageView<'_>> = frame
+                                        .iter()
+                                        .map(|i| {
+                                            ImageView::rgb8(&i.data, i.width, i.height)
+                                                .expect("frame")
+                                        })
+                                        .collect();
+                                    session.step(t, &views).expect("step");
                                     t += 1;
                                 }
                                 let d = start.elapsed();

@@ -9,7 +9,8 @@ use std::sync::atomic::AtomicBool;
 use actrack::demo::train_generator_model;
 use actrack::eval::evaluate;
 use actrack::frames::{FrameOptions, FrameSource};
-use actrack::pipeline::{ContourMethod, TrackOptions, TrackOutputs, track};
+use actrack::TrackConfig;
+use actrack::pipeline::{TrackOutputs, track};
 use actrack::scene::default_scene;
 use actrack::synth::{MotionSource, random_targets, render_frames, save_frames, sequence};
 
@@ -24,12 +25,9 @@ fn run() -> actrack::eval::EvalReport {
     save_frames(&frames, &dir.path().join("frames")).unwrap();
     let mut source =
         FrameSource::open(&dir.path().join("frames"), &FrameOptions::default()).unwrap();
-    let opts = TrackOptions {
-        particles: 300,
-        seed: 3,
-        contour: ContourMethod::Raster,
-        ..TrackOptions::default()
-    };
+    // The defaults: what `actrack-cli track` runs.
+    let mut config = TrackConfig::default();
+    config.filter.seed = 3;
     let outputs = TrackOutputs {
         mcap: Some(dir.path().join("t.mcap")),
         ..TrackOutputs::default()
@@ -38,7 +36,7 @@ fn run() -> actrack::eval::EvalReport {
         &model,
         &scene,
         &mut source,
-        &opts,
+        &config,
         &outputs,
         &AtomicBool::new(false),
         &mut |_, _| {},

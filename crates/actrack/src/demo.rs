@@ -18,7 +18,8 @@ use crate::eval::{EvalReport, evaluate};
 use crate::frames::{FrameOptions, FrameSource};
 use crate::model::{Action, ActionModel, ArmLengths, Provenance, THETA_FRAME};
 use crate::motion::{ACTIONS, demonstrations};
-use crate::pipeline::{TrackOptions, TrackOutputs, TrackSummary, track};
+use crate::config::TrackConfig;
+use crate::pipeline::{TrackOutputs, TrackSummary, track};
 use crate::scene::{Scene, default_scene};
 use crate::synth::{
     MotionSource, motion_params, random_targets, render_frames, save_frames, sequence,
@@ -29,8 +30,9 @@ use crate::synth::{
 pub struct DemoOptions {
     /// Output folder.
     pub dir: PathBuf,
-    /// Particles.
-    pub particles: usize,
+    /// The tracking configuration (default: the `default` preset; its filter seed is replaced by
+    /// `seed`).
+    pub config: TrackConfig,
     /// Seed of everything.
     pub seed: u64,
     /// Frame size.
@@ -47,7 +49,7 @@ impl Default for DemoOptions {
     fn default() -> Self {
         Self {
             dir: PathBuf::from("actrack-demo"),
-            particles: 300,
+            config: TrackConfig::default(),
             seed: 1,
             size: (320, 240),
             actions: ["point", "push", "reach", "point"]
@@ -249,15 +251,16 @@ pub fn run_demo(
     seq.truth.save(&truth_path)?;
     let synth_seconds = t1.elapsed().as_secs_f64();
 
-    say(&format!("tracking with {} particles…", opts.particles));
+    let mut config = opts.config.clone();
+    config.filter.seed = opts.seed;
+    config.check()?;
+    say(&format!(
+        "tracking with {} particles…",
+        config.filter.particles
+    ));
     let mcap = p("demo.mcap");
     let csv = p("track.csv");
     let mut source = FrameSource::open(&frames_dir, &FrameOptions::default())?;
-    let topts = TrackOptions {
-        particles: opts.particles,
-        seed: opts.seed,
-        ..TrackOptions::default()
-    };
     let outputs = TrackOutputs {
         mcap: Some(mcap.clone()),
         mcap_images: false,
@@ -268,7 +271,7 @@ pub fn run_demo(
         &model,
         &scene,
         &mut source,
-        &topts,
+        &config,
         &outputs,
         stop,
         progress,
@@ -282,7 +285,7 @@ pub fn run_demo(
         train_seconds,
         synth_seconds,
         demonstrations: n_demos,
-        particles: opts.particles,
+        particles: config.filter.particles,
         seed: opts.seed,
         model: model_path,
         scene: scene_path,

@@ -1,26 +1,32 @@
 //! actrack: track a human arm in video by tracking the action it performs.
 //!
-//! This crate owns I/O and pipelines: configuration (scene, cameras, table), mocap importers, frame
-//! sources, MCAP/CSV writers, evaluation metrics and the `track` pipeline. The numeric kernels are
-//! in `actrack-phmm`, `actrack-render` and `actrack-pf`.
-//!
-//! Not implemented yet: see the project's issues.
+//! This crate owns I/O and pipelines: the tracking configuration ([`TrackConfig`]) and the one
+//! tracking loop ([`Session`]), the scene (cameras, table, actor), mocap importers, frame sources,
+//! MCAP/CSV writers, evaluation metrics and the `track` pipeline. The numeric kernels are in
+//! `actrack-phmm`, `actrack-render` and `actrack-pf`.
 
 pub mod bench;
+pub mod config;
 pub mod demo;
 pub mod error;
 pub mod eval;
 pub mod frames;
+pub mod gate;
 pub mod manifest;
 pub mod mcap_out;
 pub mod mocap;
 pub mod model;
 pub mod motion;
+pub mod observation;
 pub mod pipeline;
 pub mod plots;
-pub mod reproduce;
 pub mod scene;
+pub mod session;
 pub mod synth;
 pub mod track_csv;
 pub mod train;
+pub use config::TrackConfig;
 pub use error::{Error, Result};
+pub use model::ActionModel;
+pub use scene::Scene;
+pub use session::{FrameResult, Session};

@@ -391,6 +391,23 @@ impl TrackWriter {
         self.frames
     }
 
+    /// Writes the effective tracking configuration as a metadata record `actrack.config`
+    /// (key `toml`: the [`crate::TrackConfig`] as TOML), so that the track can be reproduced.
+    pub fn write_config(&mut self, config: &crate::config::TrackConfig) -> Result<()> {
+        let mut metadata = BTreeMap::new();
+        metadata.insert("toml".to_string(), config.to_toml());
+        metadata.insert(
+            "version".to_string(),
+            env!("CARGO_PKG_VERSION").to_string(),
+        );
+        self.w
+            .write_metadata(&mcap::records::Metadata {
+                name: "actrack.config".into(),
+                metadata,
+            })
+            .map_err(|e| mcap_err(&self.tmp, &e))
+    }
+
     /// Finishes the file (summary and indexes) and renames it into place.
     pub fn finish(mut self) -> Result<()> {
         self.w.finish().map_err(|e| mcap_err(&self.tmp, &e))?;

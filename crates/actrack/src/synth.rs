@@ -15,7 +15,7 @@ use rayon::prelude::*;
 use crate::error::{Error, Result};
 use crate::model::ActionModel;
 use crate::motion::{MotionParams, generate};
-use crate::pipeline::{render_arm, render_camera};
+use crate::scene::{render_arm, render_camera};
 use crate::scene::Scene;
 use crate::track_csv::{TrajRow, Trajectory};
 

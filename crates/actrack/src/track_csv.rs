@@ -124,6 +124,18 @@ impl Trajectory {
         std::fs::rename(&tmp, path).map_err(|e| Error::write(path, e))
     }
 
+    /// Writes the CSV to `path` with `comment` (lines starting with `#`, such as
+    /// [`crate::TrackConfig::to_comment`]) before the header.
+    pub fn save_with_comment(&self, path: &Path, comment: &str) -> Result<()> {
+        let tmp = temp_path(path);
+        let file = std::fs::File::create(&tmp).map_err(|e| Error::write(&tmp, e))?;
+        let mut out = std::io::BufWriter::new(file);
+        out.write_all(comment.as_bytes())
+            .and_then(|()| self.write_to(out))
+            .map_err(|e| Error::write(&tmp, e))?;
+        std::fs::rename(&tmp, path).map_err(|e| Error::write(path, e))
+    }
+
     /// Reads a trajectory CSV (ground truth or tracker output).
     pub fn load(path: &Path) -> Result<Self> {
         let text = std::fs::read_to_string(path).map_err(|e| Error::read(path, e))?;

@@ -128,9 +128,33 @@ fn track_writes_valid_mcap_and_csv_then_eval() {
             String::from_utf8_lossy(&v.stdout),
             String::from_utf8_lossy(&v.stderr)
         );
+        // The effective configuration is in the MCAP metadata, read by the official reader.
+        let meta = Command::new("python3")
+            .args([
+                "-c",
+                "import sys; from mcap.reader import make_reader\n\
+                 r = make_reader(open(sys.argv[1], 'rb'))\n\
+                 m = {x.name: x.metadata for x in r.iter_metadata()}\n\
+                 print(m['actrack.config']['toml'])",
+            ])
+            .arg(f.root.join("t.mcap"))
+            .output()
+            .unwrap();
+        assert!(meta.status.success(), "{}", String::from_utf8_lossy(&meta.stderr));
+        let text = String::from_utf8_lossy(&meta.stdout);
+        let cfg = actrack::TrackConfig::parse(&text, Path::new("metadata")).unwrap();
+        assert_eq!(cfg.filter.particles, 60);
+        assert_eq!(cfg.filter.seed, 2);
     } else {
         eprintln!("note: python3 with `mcap` and `jsonschema` not found; MCAP validation skipped");
     }
+    // The CSV's header comment carries the configuration too.
+    let csv = std::fs::read_to_string(f.root.join("t.csv")).unwrap();
+    let cfg = actrack::TrackConfig::from_comment(&csv).unwrap().unwrap();
+    let mut expected = actrack::TrackConfig::default();
+    expected.set("filter.particles=60").unwrap();
+    expected.set("filter.seed=2").unwrap();
+    assert_eq!(cfg, expected);
     let e = Command::new(BIN)
         .args([
             "eval",
@@ -151,6 +175,73 @@ fn track_writes_valid_mcap_and_csv_then_eval() {
     assert!(j["overall"]["rmse"].as_f64().unwrap().is_finite());
     for p in ["posterior.png", "theta.png", "fingertip.png"] {
         assert!(f.root.join("plots").join(p).exists());
+    }
+}
+
+/// The centred median writes every frame once and in order (CSV, overlays, a valid MCAP), with
+/// the causal track's frames, actions and posteriors and other poses.
+#[test]
+fn centred_median_writes_every_frame_in_order() {
+    let f = fixture();
+    let ok = |out: std::process::Output| {
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    };
+    ok(track(
+        &f.root,
+        "video/frames",
+        &["--csv", "causal.csv", "--set", "output.median=causal", "--set", "output.median_window=5"],
+        None,
+    ));
+    let args = [
+        "-o",
+        "centred.mcap",
+        "--csv",
+        "centred.csv",
+        "--images",
+        "--overlay",
+        "ov-centred",
+        "--set",
+        "output.median=centred",
+    ];
+    ok(track(&f.root, "video/frames", &args, None));
+    let n = std::fs::read_dir(f.root.join("video/frames"))
+        .unwrap()
+        .count();
+    assert_eq!(
+        std::fs::read_dir(f.root.join("ov-centred")).unwrap().count(),
+        n
+    );
+    let load = |name: &str| actrack::track_csv::Trajectory::load(&f.root.join(name)).unwrap();
+    let (causal, centred) = (load("causal.csv"), load("centred.csv"));
+    let frames: Vec<usize> = centred.rows.iter().map(|r| r.frame).collect();
+    assert_eq!(frames, (0..n).collect::<Vec<_>>());
+    assert_eq!(causal.rows.len(), n);
+    let mut differs = 0;
+    for (a, b) in causal.rows.iter().zip(&centred.rows) {
+        assert_eq!((&a.action, a.theta), (&b.action, b.theta), "frame {}", a.frame);
+        assert!(b.pose.iter().all(|v| v.is_finite()));
+        differs += usize::from(a.pose != b.pose);
+    }
+    assert!(differs > 0, "the centred median changed no pose");
+    if python_has_mcap() {
+        let script =
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/python/validate_mcap.py");
+        let v = Command::new("python3")
+            .arg(script)
+            .arg(f.root.join("centred.mcap"))
+            .args(["--expect-frames", &n.to_string()])
+            .output()
+            .unwrap();
+        assert!(
+            v.status.success(),
+            "{}\n{}",
+            String::from_utf8_lossy(&v.stdout),
+            String::from_utf8_lossy(&v.stderr)
+        );
     }
 }
 
@@ -265,9 +356,9 @@ fn bad_input_names_the_frame_with_exit_code_2() {
         String::from_utf8_lossy(&ok.stderr)
     );
     assert!(String::from_utf8_lossy(&ok.stderr).contains("skipped frame 4"));
-    // A negative fingertip floor is a value, not a flag, and so is `table` (the scene's table
-    // surface).
-    for floor in ["-0.3", "table"] {
+    // A negative fingertip floor is a value, not a flag, and so are `table` (the scene's table
+    // surface) and `off`.
+    for floor in ["-0.3", "table", "off"] {
         let floored = track(
             &f.root,
             "bad",
@@ -275,8 +366,8 @@ fn bad_input_names_the_frame_with_exit_code_2() {
                 "--csv",
                 "floor.csv",
                 "--skip-bad-frames",
-                "--fingertip-floor",
-                floor,
+                "--set",
+                &format!("actor.fingertip_floor={floor}"),
             ],
             None,
         );
@@ -294,36 +385,45 @@ fn bad_input_names_the_frame_with_exit_code_2() {
                 .count()
                 == 5
     );
-    // A bad value of an option is a usage error naming the option.
-    let bad_values: [(&str, &[&str]); 5] = [
-        ("--speed-range", &["2,1", "0.8", "a,1"]),
-        ("--max-stay", &["0", "1.5", "x", "nan"]),
-        ("--height-scale", &["0", "x", "inf", "nan"]),
-        ("--fingertip-floor", &["x", "inf", "nan", "tables"]),
-        ("--action-floor", &["0", "1", "x", "nan"]),
+    // A bad configuration value or key is a usage error naming the key.
+    let bad_sets: [(&str, &[&str]); 8] = [
+        ("filter.particles=0", &["filter.particles", "0"]),
+        ("filter.particles=-4", &["filter.particles"]),
+        ("observation.gamma=0", &["observation.gamma"]),
+        ("actor.floor_sigma=-0.01", &["actor.floor_sigma"]),
+        ("filter.action_floor=1.5", &["filter.action_floor", "1.5"]),
+        ("observation.short_contour_penalty.quantile=2", &["quantile"]),
+        ("output.median_window=4", &["output.median_window", "odd"]),
+        ("filter.particels=10", &["particels", "unknown"]),
     ];
-    for (option, values) in bad_values {
-        for bad in values {
-            expect_input_error(
-                &track(
-                    &f.root,
-                    "video/frames",
-                    &["--csv", "x.csv", option, bad],
-                    None,
-                ),
-                &[option],
-            );
-        }
+    for (set, needles) in bad_sets {
+        expect_input_error(
+            &track(&f.root, "video/frames", &["--csv", "x.csv", "--set", set], None),
+            needles,
+        );
     }
-    // Keeping the last state's dwell needs a cap.
+    std::fs::write(
+        f.root.join("bad.toml"),
+        "[filter]\nparticles = 100\nsigma = 0.1\n",
+    )
+    .unwrap();
     expect_input_error(
         &track(
             &f.root,
             "video/frames",
-            &["--csv", "x.csv", "--keep-last-dwell"],
+            &["--csv", "x.csv", "--config", "bad.toml"],
             None,
         ),
-        &["--keep-last-dwell", "--max-stay"],
+        &["bad.toml:3", "sigma"],
+    );
+    expect_input_error(
+        &track(
+            &f.root,
+            "video/frames",
+            &["--csv", "x.csv", "--preset", "fastest"],
+            None,
+        ),
+        &["fastest", "default", "paper"],
     );
     // Empty directory.
     std::fs::create_dir_all(f.root.join("empty")).unwrap();

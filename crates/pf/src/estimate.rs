@@ -105,16 +105,125 @@ impl MedianFilter {
         for (c, o) in out.iter_mut().enumerate() {
             self.scratch.clear();
             self.scratch.extend(self.history.iter().map(|p| p[c]));
-            self.scratch.sort_unstable_by(f64::total_cmp);
-            let n = self.scratch.len();
-            *o = if n % 2 == 1 {
-                self.scratch[n / 2]
-            } else {
-                0.5 * (self.scratch[n / 2 - 1] + self.scratch[n / 2])
-            };
+            *o = median_of(&mut self.scratch);
         }
         out
     }
+}
+
+/// The median of `v` (sorted in place; an even count gives the mean of the two middle values).
+fn median_of(v: &mut [f64]) -> f64 {
+    v.sort_unstable_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+/// Centred per-coordinate median filter of poses (SPEC §3.7's option): frame t's output is the
+/// median of frames t − h … t + h, h = (window − 1)/2, truncated at both ends of the sequence.
+/// Streaming: frame t's output is known once frame t + h has been pushed, so the outputs lag
+/// the inputs by h frames, and [`CentredMedian::finish`] returns the last h. For offline
+/// tracking (a file, not a live camera); [`MedianFilter`] is the causal filter of the tracker.
+#[derive(Debug, Clone)]
+pub struct CentredMedian {
+    half: usize,
+    /// The inputs still needed: frames `first` … `pushed − 1`.
+    history: VecDeque<[f64; 9]>,
+    first: usize,
+    pushed: usize,
+    emitted: usize,
+    scratch: Vec<f64>,
+}
+
+impl CentredMedian {
+    /// A filter over an odd `window` ≥ 1 of frames (1: the input unchanged).
+    ///
+    /// # Errors
+    /// [`PfError::InvalidConfig`](crate::PfError::InvalidConfig) when `window` is even or 0: an even window has
+    /// no centre.
+    pub fn new(window: usize) -> Result<Self, crate::PfError> {
+        if window.is_multiple_of(2) {
+            return Err(crate::PfError::InvalidConfig(format!(
+                "a centred median needs an odd window ≥ 1 (frames t − h … t + h), got {window}"
+            )));
+        }
+        Ok(Self {
+            half: window / 2,
+            history: VecDeque::with_capacity(window),
+            first: 0,
+            pushed: 0,
+            emitted: 0,
+            scratch: Vec::with_capacity(window),
+        })
+    }
+
+    /// Frames by which the outputs lag the inputs, (window − 1)/2.
+    pub fn lag(&self) -> usize {
+        self.half
+    }
+
+    /// Forget every frame (the next push is frame 0 of a new sequence).
+    pub fn reset(&mut self) {
+        self.history.clear();
+        (self.first, self.pushed, self.emitted) = (0, 0, 0);
+    }
+
+    /// Add the next frame's pose; returns the output of frame `pushed − 1 − lag` once it is
+    /// known (`None` for the first `lag` frames).
+    pub fn push(&mut self, pose: [f64; 9]) -> Option<[f64; 9]> {
+        self.history.push_back(pose);
+        self.pushed += 1;
+        (self.pushed > self.emitted + self.half).then(|| self.emit())
+    }
+
+    /// The outputs of the frames not yet returned (the last `lag`, or fewer when fewer were
+    /// pushed), in order; the filter is then empty.
+    pub fn finish(&mut self) -> Vec<[f64; 9]> {
+        let mut out = Vec::with_capacity(self.pushed - self.emitted);
+        while self.emitted < self.pushed {
+            out.push(self.emit());
+        }
+        self.reset();
+        out
+    }
+
+    /// The output of frame `emitted` from the frames pushed so far.
+    fn emit(&mut self) -> [f64; 9] {
+        let t = self.emitted;
+        let lo = t.saturating_sub(self.half);
+        let hi = (t + self.half + 1).min(self.pushed);
+        let mut out = [0.0; 9];
+        for (c, o) in out.iter_mut().enumerate() {
+            self.scratch.clear();
+            self.scratch.extend(
+                self.history
+                    .range(lo - self.first..hi - self.first)
+                    .map(|p| p[c]),
+            );
+            *o = median_of(&mut self.scratch);
+        }
+        self.emitted += 1;
+        // Frame t + 1 needs frames from t + 1 − h on.
+        while self.first < self.emitted.saturating_sub(self.half) {
+            self.history.pop_front();
+            self.first += 1;
+        }
+        out
+    }
+}
+
+/// The centred median ([`CentredMedian`]) of a whole sequence of poses.
+///
+/// # Errors
+/// When `window` is even or 0.
+pub fn centred_median(poses: &[[f64; 9]], window: usize) -> Result<Vec<[f64; 9]>, crate::PfError> {
+    let mut f = CentredMedian::new(window)?;
+    let mut out: Vec<[f64; 9]> = poses.iter().filter_map(|p| f.push(*p)).collect();
+    out.extend(f.finish());
+    Ok(out)
 }
 
 /// Everything [`compute`] reads about the current weighted set.
@@ -454,6 +563,86 @@ mod tests {
                 out.iter().all(|v| (*v - e).abs() < 1e-15),
                 "{x}: {out:?} vs {e}"
             );
+        }
+    }
+
+    /// Brute force: frame t's window [t − h, t + h] clipped to the sequence, sorted per coordinate.
+    fn centred_brute(poses: &[[f64; 9]], window: usize) -> Vec<[f64; 9]> {
+        let h = window / 2;
+        (0..poses.len())
+            .map(|t| {
+                let w = &poses[t.saturating_sub(h)..(t + h + 1).min(poses.len())];
+                std::array::from_fn(|c| {
+                    let mut v: Vec<f64> = w.iter().map(|p| p[c]).collect();
+                    v.sort_by(f64::total_cmp);
+                    let n = v.len();
+                    if n % 2 == 1 {
+                        v[n / 2]
+                    } else {
+                        (v[n / 2 - 1] + v[n / 2]) / 2.0
+                    }
+                })
+            })
+            .collect()
+    }
+
+    #[test]
+    #[allow(clippy::float_cmp)] // the same values selected: exact
+    fn centred_median_matches_brute_force() {
+        // A deterministic pseudo-random sequence with repeated values and outliers.
+        let mut x: u64 = 12345;
+        let mut next = || {
+            x = x.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            ((x >> 33) % 1000) as f64 / 100.0 - 5.0
+        };
+        let poses: Vec<[f64; 9]> = (0..40).map(|_| std::array::from_fn(|_| next())).collect();
+        for window in [1, 3, 5, 7, 9, 61] {
+            for n in [0, 1, 2, 3, 4, 7, 40] {
+                let seq = &poses[..n];
+                let got = centred_median(seq, window).unwrap();
+                assert_eq!(got, centred_brute(seq, window), "window {window}, {n} frames");
+            }
+        }
+        assert_eq!(centred_median(&poses, 1).unwrap(), poses);
+    }
+
+    #[test]
+    #[allow(clippy::float_cmp)]
+    fn centred_median_streams_with_a_lag_and_truncates_the_ends() {
+        let seq = [1.0, 10.0, 2.0, 3.0, 100.0, 4.0, 5.0];
+        // Windows: [1,10] [1,10,2] [10,2,3] [2,3,100] [3,100,4] [100,4,5] [4,5].
+        let expect = [5.5, 2.0, 3.0, 3.0, 4.0, 5.0, 4.5];
+        let mut f = CentredMedian::new(3).unwrap();
+        assert_eq!(f.lag(), 1);
+        let mut out = Vec::new();
+        for (t, x) in seq.iter().enumerate() {
+            let o = f.push([*x; 9]);
+            // Nothing for the first frame, then frame t − 1's output.
+            assert_eq!(o.is_some(), t >= 1, "frame {t}");
+            out.extend(o);
+        }
+        out.extend(f.finish());
+        let got: Vec<f64> = out.iter().map(|p| p[0]).collect();
+        assert_eq!(got, expect);
+        assert!(out.iter().all(|p| p.iter().all(|v| *v == p[0])));
+        // finish() leaves an empty filter: a new sequence starts at frame 0.
+        assert!(f.finish().is_empty());
+        assert_eq!(f.push([7.0; 9]), None);
+        assert_eq!(f.finish(), vec![[7.0; 9]]);
+        // The history stays bounded by the window.
+        let mut g = CentredMedian::new(5).unwrap();
+        for t in 0..100 {
+            g.push([f64::from(t); 9]);
+            assert!(g.history.len() <= 5, "{} frames kept", g.history.len());
+        }
+    }
+
+    #[test]
+    fn centred_median_rejects_even_windows() {
+        for w in [0, 2, 4] {
+            let e = CentredMedian::new(w).unwrap_err().to_string();
+            assert!(e.contains("odd window") && e.contains(&w.to_string()), "{e}");
+            assert!(centred_median(&[[0.0; 9]], w).is_err());
         }
     }
 }

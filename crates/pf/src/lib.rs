@@ -61,7 +61,9 @@ pub use config::{
 };
 pub use cooling::cooling_sigma;
 pub use error::PfError;
-pub use estimate::{DET_FLOOR, Estimate, HISTOGRAM_BINS, MedianFilter};
+pub use estimate::{
+    CentredMedian, DET_FLOOR, Estimate, HISTOGRAM_BINS, MedianFilter, centred_median,
+};
 pub use observation::{ConstantObservation, ObservationModel};
 pub use state::{ActionState, CloudParticle};
 pub use tracker::Tracker;

@@ -296,8 +296,8 @@ impl PyScene {
         (vec_to_py(py, c.to_vec()), vec_to_py(py, h.to_vec()))
     }
 
-    /// The table surface's height in the actor frame (metres; negative: below the shoulder), a
-    /// floor for `Tracker(..., fingertip_floor=...)`.
+    /// The table surface's height in the actor frame (metres; negative: below the shoulder):
+    /// the fingertip floor `actor.fingertip_floor = "table"` of the tracker's configuration.
     #[getter]
     fn table_height(&self) -> f64 {
         self.inner.table_height()

@@ -8,7 +8,7 @@
 //!
 //! Modules: [`models`] (`Hmm`, `Phmm`, `FitReport`, `ThetaEstimate`), [`io`] (`ActionModel`,
 //! `load_mocap`, `Scene`, `evaluate`), [`tracker`] (`Tracker`, `Estimate`, `track_video`,
-//! `edge_image`, `contour_likelihood`).
+//! `centred_median`, `edge_image`, `contour_likelihood`).
 
 // pyo3 extracts arguments as owned values (`PathBuf`, `PyRef`), so by-value parameters are the
 // binding convention here, not an oversight.
@@ -40,6 +40,7 @@ fn _actrack(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<tracker::PyTracker>()?;
     m.add_class::<tracker::PyEstimate>()?;
     m.add_function(wrap_pyfunction!(tracker::track_video, m)?)?;
+    m.add_function(wrap_pyfunction!(tracker::centred_median, m)?)?;
     m.add_function(wrap_pyfunction!(tracker::edge_image, m)?)?;
     m.add_function(wrap_pyfunction!(tracker::contour_likelihood, m)?)?;
     Ok(())

@@ -1,25 +1,192 @@
-//! `actrack.Tracker` (the action-space particle filter with the scene's contour likelihood, frame
-//! by frame from numpy images) and `actrack.track_video` (the `actrack-cli track` pipeline on a
-//! file: MCAP and CSV out). Both release the GIL while they compute.
+//! `actrack.Tracker` (an [`actrack::Session`]: the action-space particle filter with the
+//! configured observation model, frame by frame from numpy images) and `actrack.track_video`
+//! (the `actrack-cli track` pipeline on a file: MCAP and CSV out). Both release the GIL while
+//! they compute, and both take the same configuration keywords ([`build_config`]): a
+//! `TrackConfig` from a file, a dict or a preset, then `set=["key=value", …]`, `n_particles`
+//! and `seed`.
 
+use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 
 use actrack::frames::{FrameOptions, FrameSource};
-use actrack::pipeline::{
-    ContourMethod, FrameResult, GAMMA, Pipeline, TrackOptions, TrackOutputs, edge_params,
-    render_arm, render_camera, track,
-};
-use actrack_render::{EdgeImage, EdgeWorkspace, ImageView, LikelihoodModel};
+use actrack::pipeline::{TrackOutputs, centred_median as pipeline_centred_median, track};
+use actrack::scene::{edge_params, render_arm, render_camera};
+use actrack::{FrameResult, Session, TrackConfig};
+use actrack_render::{ContourMethod, EdgeImage, EdgeWorkspace, ImageView, LikelihoodModel};
 use image::RgbImage;
 use numpy::ndarray::{Array1, Array2};
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArrayDyn, PyUntypedArrayMethods};
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
+use pyo3::types::{PyBool, PyDict, PyFloat, PyInt, PyList, PyString, PyTuple};
 
 use crate::convert::{array_arg, matrix, vec_to_py};
 use crate::errors::{actrack_error, value_error};
-use crate::io::{PyActionModel, PyScene};
+use crate::io::{PyActionModel, PyScene, to_python};
+
+/// A Python value as a TOML literal for [`TrackConfig::set`]: bool, int, float (`inf`, `nan`
+/// included), str, or a list / tuple of those. `key` names the configuration key in errors.
+fn toml_literal(key: &str, value: &Bound<'_, PyAny>) -> PyResult<String> {
+    if value.is_instance_of::<PyBool>() {
+        return Ok(value.extract::<bool>()?.to_string());
+    }
+    if value.is_instance_of::<PyInt>() {
+        return Ok(value.str()?.to_string());
+    }
+    if value.is_instance_of::<PyFloat>() {
+        return Ok(float_literal(value.extract::<f64>()?));
+    }
+    if let Ok(s) = value.cast::<PyString>() {
+        return Ok(string_literal(s.to_str()?));
+    }
+    if value.is_instance_of::<PyList>() || value.is_instance_of::<PyTuple>() {
+        let items = value
+            .try_iter()?
+            .map(|v| toml_literal(key, &v?))
+            .collect::<PyResult<Vec<_>>>()?;
+        return Ok(format!("[{}]", items.join(", ")));
+    }
+    // numpy scalars and other numbers.
+    if let Ok(i) = value.extract::<i64>() {
+        return Ok(i.to_string());
+    }
+    if let Ok(x) = value.extract::<f64>() {
+        return Ok(float_literal(x));
+    }
+    let kind = value
+        .get_type()
+        .name()
+        .map_or_else(|_| "?".to_string(), |n| n.to_string());
+    Err(value_error(format!(
+        "invalid configuration: config key `{key}`: a {kind} is not a configuration value \
+         (bool, int, float, str or a list of them)"
+    )))
+}
+
+/// A float as TOML (`1.0`, `1e-5`, `inf`, `-inf`, `nan`).
+fn float_literal(x: f64) -> String {
+    if x.is_nan() {
+        "nan".into()
+    } else {
+        format!("{x:?}")
+    }
+}
+
+/// A TOML basic string.
+fn string_literal(s: &str) -> String {
+    let mut out = String::with_capacity(s.len() + 2);
+    out.push('"');
+    for c in s.chars() {
+        match c {
+            '"' => out.push_str("\\\""),
+            '\\' => out.push_str("\\\\"),
+            c if c.is_control() => {
+                let _ = write!(out, "\\u{:04X}", u32::from(c));
+            }
+            c => out.push(c),
+        }
+    }
+    out.push('"');
+    out
+}
+
+/// The `key=value` assignments of a (nested) configuration dict: `{"filter": {"particles": 800}}`
+/// and `{"filter.particles": 800}` both give `filter.particles=800`.
+fn dict_assignments(prefix: &str, dict: &Bound<'_, PyDict>, out: &mut Vec<String>) -> PyResult<()> {
+    for (k, v) in dict.iter() {
+        let name: String = k.extract().map_err(|_| {
+            value_error(format!(
+                "invalid configuration: the keys of a config dict must be strings, got {}",
+                k.repr().map_or_else(|_| "?".into(), |r| r.to_string())
+            ))
+        })?;
+        let key = if prefix.is_empty() {
+            name
+        } else {
+            format!("{prefix}.{name}")
+        };
+        if let Ok(sub) = v.cast::<PyDict>() {
+            dict_assignments(&key, sub, out)?;
+        } else {
+            let value = toml_literal(&key, &v)?;
+            out.push(format!("{key}={value}"));
+        }
+    }
+    Ok(())
+}
+
+/// The effective configuration of the keywords shared by `Tracker` and `track_video`, in the
+/// order of `actrack-cli track`: the base (`config` a TOML file, or the preset `preset` —
+/// `"default"` when not given — with the keys of `config` a dict over it), then each `set`
+/// assignment, then `n_particles` (`filter.particles`) and `seed` (`filter.seed`). Every error
+/// is an `ActrackError` (a `ValueError`) naming the offending key; a file that cannot be read is
+/// an `ActrackOSError`.
+pub(crate) fn build_config(
+    config: Option<&Bound<'_, PyAny>>,
+    preset: Option<&str>,
+    set: Option<&Bound<'_, PyAny>>,
+    n_particles: Option<&Bound<'_, PyAny>>,
+    seed: Option<&Bound<'_, PyAny>>,
+) -> PyResult<TrackConfig> {
+    let base = |name: Option<&str>| {
+        TrackConfig::preset(name.unwrap_or("default")).map_err(|e| actrack_error(&e))
+    };
+    let mut assignments = Vec::new();
+    let mut cfg = match config {
+        None => base(preset)?,
+        Some(c) if c.is_none() => base(preset)?,
+        Some(c) => {
+            if let Ok(d) = c.cast::<PyDict>() {
+                dict_assignments("", d, &mut assignments)?;
+                base(preset)?
+            } else {
+                let path: PathBuf = c.extract().map_err(|_| {
+                    value_error(
+                        "config must be the path of a TOML file (str or os.PathLike) or a dict \
+                         of configuration keys",
+                    )
+                })?;
+                if preset.is_some() {
+                    return Err(value_error(
+                        "give config (a file) or preset, not both (a config dict goes over the \
+                         preset)",
+                    ));
+                }
+                TrackConfig::load(&path).map_err(|e| actrack_error(&e))?
+            }
+        }
+    };
+    if let Some(s) = set.filter(|s| !s.is_none()) {
+        if let Ok(one) = s.cast::<PyString>() {
+            assignments.push(one.to_str()?.to_string());
+        } else {
+            let items = s.try_iter().map_err(|_| {
+                value_error(
+                    "set must be a list of \"key=value\" strings, e.g. [\"filter.particles=800\"]",
+                )
+            })?;
+            for item in items {
+                let item = item?;
+                let text: String = item.extract().map_err(|_| {
+                    value_error(format!(
+                        "set must be a list of \"key=value\" strings, got the item {}",
+                        item.repr().map_or_else(|_| "?".into(), |r| r.to_string())
+                    ))
+                })?;
+                assignments.push(text);
+            }
+        }
+    }
+    for (key, value) in [("filter.particles", n_particles), ("filter.seed", seed)] {
+        if let Some(v) = value.filter(|v| !v.is_none()) {
+            assignments.push(format!("{key}={}", toml_literal(key, v)?));
+        }
+    }
+    for a in &assignments {
+        cfg.set(a).map_err(|e| actrack_error(&e))?;
+    }
+    Ok(cfg)
+}
 
 /// An (H, W, 3) or (H, W) uint8 array as an RGB image.
 fn rgb_image(frame: &Bound<'_, PyAny>) -> PyResult<RgbImage> {
@@ -138,21 +305,19 @@ impl PyEstimate {
     }
 }
 
-/// The action-space particle filter of an action model in a scene, scoring particles by the
-/// contour likelihood of each frame (one (H, W, 3) uint8 RGB image for the scene's first camera,
-/// or a list with one image per camera).
+/// The tracker of an action model in a scene (an `actrack::Session`), fed one frame at a time:
+/// one (H, W, 3) uint8 RGB (or (H, W) grey) image for a scene with one camera, or a list with
+/// one image per camera of the scene, in its order.
 #[pyclass(module = "actrack._actrack", name = "Tracker")]
 pub struct PyTracker {
-    pipeline: Pipeline,
+    session: Session,
     names: Vec<String>,
     frames: usize,
 }
 
 impl PyTracker {
     fn images(frame: &Bound<'_, PyAny>) -> PyResult<Vec<RgbImage>> {
-        if frame.is_instance_of::<pyo3::types::PyList>()
-            || frame.is_instance_of::<pyo3::types::PyTuple>()
-        {
+        if frame.is_instance_of::<PyList>() || frame.is_instance_of::<PyTuple>() {
             frame.try_iter()?.map(|f| rgb_image(&f?)).collect()
         } else {
             Ok(vec![rgb_image(frame)?])
@@ -161,11 +326,11 @@ impl PyTracker {
 
     fn step_images(&mut self, py: Python<'_>, images: &[RgbImage]) -> PyResult<FrameResult> {
         let index = self.frames;
-        let pipeline = &mut self.pipeline;
+        let session = &mut self.session;
         let r = py
             .detach(|| {
                 let refs: Vec<&RgbImage> = images.iter().collect();
-                pipeline.step(index, &refs)
+                session.step_rgb(index, &refs)
             })
             .map_err(|e| actrack_error(&e))?;
         self.frames += 1;
@@ -175,30 +340,38 @@ impl PyTracker {
 
 #[pymethods]
 impl PyTracker {
+    /// A tracker of `model` in `scene` with the configuration of `config` (a TOML file, or a
+    /// dict of keys over `preset`), `preset` (`"default"` when not given, or `"paper"`), `set`
+    /// (`["key=value", …]` overrides), `n_particles` (`filter.particles`) and `seed`
+    /// (`filter.seed`), applied in that order. An invalid configuration raises `ActrackError`
+    /// (a `ValueError`) naming the key.
     #[new]
-    #[pyo3(signature = (model, scene, *, n_particles=400, seed=0, height_scale=None, fingertip_floor=None, action_floor=None))]
+    #[pyo3(signature = (model, scene, *, config=None, preset=None, n_particles=None, seed=None, set=None))]
+    #[allow(clippy::too_many_arguments)]
     fn new(
+        py: Python<'_>,
         model: PyRef<'_, PyActionModel>,
         scene: PyRef<'_, PyScene>,
-        n_particles: usize,
-        seed: u64,
-        height_scale: Option<f64>,
-        fingertip_floor: Option<f64>,
-        action_floor: Option<f64>,
+        config: Option<Bound<'_, PyAny>>,
+        preset: Option<String>,
+        n_particles: Option<Bound<'_, PyAny>>,
+        seed: Option<Bound<'_, PyAny>>,
+        set: Option<Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
-        let opts = TrackOptions {
-            particles: n_particles,
-            seed,
-            height_scale,
-            fingertip_floor,
-            action_floor,
-            ..TrackOptions::default()
-        };
-        let pipeline =
-            Pipeline::new(&model.inner, &scene.inner, &opts).map_err(|e| actrack_error(&e))?;
-        let names = pipeline.action_names().to_vec();
+        let cfg = build_config(
+            config.as_ref(),
+            preset.as_deref(),
+            set.as_ref(),
+            n_particles.as_ref(),
+            seed.as_ref(),
+        )?;
+        let (m, s) = (&model.inner, &scene.inner);
+        let session = py
+            .detach(|| Session::new(m, s, &cfg))
+            .map_err(|e| actrack_error(&e))?;
+        let names = session.action_names().to_vec();
         Ok(PyTracker {
-            pipeline,
+            session,
             names,
             frames: 0,
         })
@@ -210,7 +383,30 @@ impl PyTracker {
         self.names.clone()
     }
 
-    /// One filter step on a frame; returns its `Estimate`.
+    /// The effective configuration as TOML (every key; `Tracker(..., config=path)` with this
+    /// text in a file, or `actrack-cli track --config`, reproduces the track).
+    #[getter]
+    fn config(&self) -> String {
+        self.session.config().to_toml()
+    }
+
+    /// The effective configuration as a nested dict (what `config=` accepts).
+    #[getter]
+    fn config_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        to_python(py, self.session.config())
+    }
+
+    /// Frames stepped so far (the index of the next frame).
+    #[getter]
+    fn frames(&self) -> usize {
+        self.frames
+    }
+
+    /// One filter step on a frame; returns its `Estimate`. Its `smoothed_pose` is the causal
+    /// median of the best poses (known at once): of the last `output.median_window` frames when
+    /// `output.median` is `"causal"`, else of the last 5. The centred median of the `default`
+    /// preset needs the frames after each one: `track_video` applies it, or
+    /// `centred_median(best poses, window)` on the poses of a finished sequence.
     fn step(&mut self, py: Python<'_>, frame: &Bound<'_, PyAny>) -> PyResult<PyEstimate> {
         let images = Self::images(frame)?;
         let r = self.step_images(py, &images)?;
@@ -220,47 +416,19 @@ impl PyTracker {
         })
     }
 
-    /// Step through frames (an iterable of images or a (T, H, W, 3) array) and return arrays over
-    /// time: `action_posterior` (T, A), `theta_mean` / `theta_std` (T, 2), `entropy`, `ess`
-    /// (T,), `best_pose` / `smoothed_pose` (T, 9, world), `action` (T,) int64 indices into
-    /// `actions`.
+    /// Step through frames (an iterable of frames as `step` takes them, or a (T, H, W, 3)
+    /// array) and return arrays over time: `action_posterior` (T, A), `theta_mean` /
+    /// `theta_std` (T, 2), `entropy`, `ess` (T,), `best_pose` / `smoothed_pose` (T, 9, world;
+    /// `smoothed_pose` causal, as in `step`), `action` (T,) int64 indices into `actions`.
     fn track<'py>(
         &mut self,
         py: Python<'py>,
         frames: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        // One frame of look-ahead, as `track_video`: while the filter tracks frame t (GIL
-        // released), frame t + 1's edge image is computed alongside; frames are converted from
-        // Python one ahead, under the GIL.
         let mut results = Vec::new();
-        let mut iter = frames.try_iter()?;
-        let mut next = iter.next().map(|f| Self::images(&f?)).transpose()?;
-        if let Some(images) = &next {
-            let (index, pipeline) = (self.frames, &mut self.pipeline);
-            py.detach(|| {
-                let refs: Vec<&RgbImage> = images.iter().collect();
-                pipeline.prime(index, &refs)
-            })
-            .map_err(|e| actrack_error(&e))?;
-        }
-        while next.take().is_some() {
-            let upcoming = iter.next().map(|f| Self::images(&f?)).transpose()?;
-            let (index, pipeline) = (self.frames, &mut self.pipeline);
-            let (r, prepared) = py
-                .detach(|| {
-                    pipeline.step_overlapped(|ahead| match &upcoming {
-                        Some(images) => {
-                            let refs: Vec<&RgbImage> = images.iter().collect();
-                            ahead.prepare(index + 1, &refs)
-                        }
-                        None => Ok(()),
-                    })
-                })
-                .map_err(|e| actrack_error(&e))?;
-            self.frames += 1;
-            results.push(r);
-            prepared.map_err(|e| actrack_error(&e))?;
-            next = upcoming;
+        for frame in frames.try_iter()? {
+            let images = Self::images(&frame?)?;
+            results.push(self.step_images(py, &images)?);
         }
         let t = results.len();
         let a = self.names.len();
@@ -311,9 +479,12 @@ impl PyTracker {
 
 /// Track a video file exactly like `actrack-cli track`: `source` is a directory of PNG/JPEG
 /// frames, a `.y4m` file or any video ffmpeg reads. Writes the MCAP track (`mcap=`) and/or the
-/// trajectory CSV (`csv=`); returns a summary dict (frames, seconds, filter_seconds, skipped).
+/// trajectory CSV (`csv=`), each with the effective configuration; returns a summary dict
+/// (frames, seconds, filter_seconds, skipped, config: the configuration as TOML). The
+/// configuration keywords are `Tracker`'s; the reported pose is `output.median`'s: the centred
+/// median of the `default` preset delays each frame by half the window, which a file allows.
 #[pyfunction]
-#[pyo3(signature = (model, scene, source, *, mcap=None, csv=None, mcap_images=false, n_particles=400, seed=0, fps=None))]
+#[pyo3(signature = (model, scene, source, *, mcap=None, csv=None, mcap_images=false, config=None, preset=None, n_particles=None, seed=None, set=None, fps=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn track_video<'py>(
     py: Python<'py>,
@@ -323,15 +494,20 @@ pub fn track_video<'py>(
     mcap: Option<PathBuf>,
     csv: Option<PathBuf>,
     mcap_images: bool,
-    n_particles: usize,
-    seed: u64,
+    config: Option<Bound<'_, PyAny>>,
+    preset: Option<String>,
+    n_particles: Option<Bound<'_, PyAny>>,
+    seed: Option<Bound<'_, PyAny>>,
+    set: Option<Bound<'_, PyAny>>,
     fps: Option<f64>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let opts = TrackOptions {
-        particles: n_particles,
-        seed,
-        ..TrackOptions::default()
-    };
+    let cfg = build_config(
+        config.as_ref(),
+        preset.as_deref(),
+        set.as_ref(),
+        n_particles.as_ref(),
+        seed.as_ref(),
+    )?;
     let outputs = TrackOutputs {
         mcap,
         mcap_images,
@@ -349,7 +525,7 @@ pub fn track_video<'py>(
                 },
             )?;
             let stop = AtomicBool::new(false);
-            track(m, s, &mut src, &opts, &outputs, &stop, &mut |_, _| {})
+            track(m, s, &mut src, &cfg, &outputs, &stop, &mut |_, _| {})
         })
         .map_err(|e| actrack_error(&e))?;
     let out = PyDict::new(py);
@@ -357,7 +533,32 @@ pub fn track_video<'py>(
     out.set_item("seconds", summary.seconds)?;
     out.set_item("filter_seconds", summary.filter_seconds)?;
     out.set_item("skipped", summary.skipped.clone())?;
+    out.set_item("config", cfg.to_toml())?;
     Ok(out)
+}
+
+/// The centred per-coordinate median of poses over time (SPEC §3.7's option, as `track_video`
+/// applies it with `output.median = "centred"`): row t of the (T, 9) result is the median of rows
+/// t − h … t + h of `poses` (T, 9), window = 2h + 1 odd, truncated at both ends.
+#[pyfunction]
+#[pyo3(signature = (poses, window=7))]
+pub fn centred_median<'py>(
+    py: Python<'py>,
+    poses: &Bound<'_, PyAny>,
+    window: usize,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let p = matrix(poses, "poses", Some(9))?;
+    if let Some(i) = (0..p.nrows()).find(|&i| p.row(i).iter().any(|v| !v.is_finite())) {
+        return Err(value_error(format!(
+            "poses row {i} is not finite: {:?}",
+            p.row(i).iter().collect::<Vec<_>>()
+        )));
+    }
+    let rows: Vec<[f64; 9]> = (0..p.nrows())
+        .map(|i| std::array::from_fn(|c| p[(i, c)]))
+        .collect();
+    let out = pipeline_centred_median(&rows, window).map_err(|e| value_error(e.to_string()))?;
+    Ok(Array2::from_shape_fn((out.len(), 9), |(i, c)| out[i][c]).into_pyarray(py))
 }
 
 /// The edge-distance image G of SPEC §4.1 for an (H, W, 3) or (H, W) uint8 frame, as the tracker
@@ -390,7 +591,8 @@ pub fn edge_image<'py>(
     Ok(arr.into_pyarray(py))
 }
 
-/// log P(I | pose) of SPEC §4 (contour likelihood, γ = 0.15) for world poses (N, 9) = (p, q, r),
+/// log P(I | pose) of SPEC §4 (raster contour likelihood, the default configuration's γ = 0.15
+/// for one view) for world poses (N, 9) = (p, q, r),
 /// given one edge image (H, W) per camera of the scene (a single array for one camera). The arm
 /// is rendered with the scene's radii and `arm_lengths` = (upper arm, elbow → fingertip) in
 /// metres, or the lengths of `model`, unless the scene fixes them. Returns shape (N,).
@@ -451,7 +653,7 @@ pub fn contour_likelihood<'py>(
     let lik = LikelihoodModel::new(
         cameras,
         render_arm(s, lengths),
-        GAMMA,
+        TrackConfig::default().observation.gamma,
         ContourMethod::Raster,
     )
     .map_err(|e| value_error(e.to_string()))?;
@@ -463,4 +665,31 @@ pub fn contour_likelihood<'py>(
         })
         .map_err(|e| value_error(e.to_string()))?;
     Ok(vec_to_py(py, out))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn literals_read_back_through_set() {
+        for x in [0.15, 1e-5, 3.0, 1e20, 0.1 + 0.2] {
+            let mut c = TrackConfig::default();
+            c.set(&format!("observation.gamma={}", float_literal(x)))
+                .unwrap();
+            assert_eq!(c.observation.gamma.to_bits(), x.to_bits(), "{x}");
+        }
+        for x in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+            let e = TrackConfig::default()
+                .set(&format!("observation.gamma={}", float_literal(x)))
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("observation.gamma") && e.contains("got"), "{e}");
+        }
+        let mut c = TrackConfig::default();
+        c.set(&format!("output.median={}", string_literal("causal")))
+            .unwrap();
+        assert_eq!(c.output.median, actrack::config::Median::Causal);
+        assert_eq!(string_literal("a\"b\\c\n"), "\"a\\\"b\\\\c\\u000A\"");
+    }
 }

@@ -28,11 +28,13 @@ def rng() -> np.random.Generator:
     return np.random.default_rng(12345)
 
 
-def write_y4m(path, frames: np.ndarray, fps: int = 30) -> None:
-    """Write (T, H, W) uint8 grey frames as a monochrome y4m video."""
+def write_y4m(path, frames: np.ndarray, fps: int = 30, full_range: bool = False) -> None:
+    """Write (T, H, W) uint8 grey frames as a monochrome y4m video. Limited range (the y4m
+    default) maps the grey levels on reading; `full_range` reads back the frames exactly."""
     t, h, w = frames.shape
+    extra = " XCOLORRANGE=FULL" if full_range else ""
     with open(path, "wb") as f:
-        f.write(f"YUV4MPEG2 W{w} H{h} F{fps}:1 Ip A1:1 Cmono\n".encode())
+        f.write(f"YUV4MPEG2 W{w} H{h} F{fps}:1 Ip A1:1 Cmono{extra}\n".encode())
         for frame in frames:
             f.write(b"FRAME\n")
             f.write(np.ascontiguousarray(frame, dtype=np.uint8).tobytes())

@@ -1,13 +1,14 @@
-//! `actrack-cli bench [--particles N] [--width W --height H] [--views V]
-//! [--contour raster|analytic] [--device cpu|gpu|auto] [--threads N] [--frames F] [--overlap]
-//! [--json]`:
-//! tracks a synthetic sequence and prints the time per frame (median, p95), frames/s, the share
-//! of each stage and the peak memory, so users can check the real-time budget on their machine.
+//! `actrack-cli bench [--config FILE | --preset NAME] [--set KEY=VALUE …] [--particles N]
+//! [--contour raster|analytic] [--device cpu|gpu|auto] [--width W --height H] [--views V]
+//! [--threads N] [--frames F] [--json]`:
+//! tracks a synthetic sequence with the session and configuration `track` uses and prints the
+//! time per frame (median, p95), frames/s, the share of each stage and the peak memory, so users
+//! can check the real-time budget on their machine.
 
+use std::path::PathBuf;
 use std::process::ExitCode;
 
-use actrack::bench::{BenchOptions, BenchReport, Device, run_bench};
-use actrack::pipeline::ContourMethod;
+use actrack::bench::{BenchOptions, BenchReport, run_bench};
 
 /// The real-time budget at 30 frames/s, ms.
 const BUDGET_MS: f64 = 1000.0 / 30.0;
@@ -35,9 +36,18 @@ pub enum DeviceArg {
 /// Options of `bench`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Particles.
-    #[arg(long, default_value_t = 400)]
-    pub particles: usize,
+    /// A tracking configuration file (TOML; default: the `default` preset, what `track` runs).
+    #[arg(long, value_name = "FILE", conflicts_with = "preset")]
+    pub config: Option<PathBuf>,
+    /// A configuration shipped with actrack (`default`, `paper`).
+    #[arg(long, value_name = "NAME")]
+    pub preset: Option<String>,
+    /// Override one configuration key (repeatable), as `track --set`.
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub set: Vec<String>,
+    /// Particles (the key `filter.particles`).
+    #[arg(long)]
+    pub particles: Option<usize>,
     /// Frame width in pixels.
     #[arg(long, default_value_t = 640)]
     pub width: u32,
@@ -47,12 +57,13 @@ pub struct Args {
     /// Synchronised views (cameras around the table).
     #[arg(long, default_value_t = 1)]
     pub views: usize,
-    /// Contour method.
-    #[arg(long, value_enum, default_value_t = Contour::Analytic)]
-    pub contour: Contour,
-    /// Where the likelihood runs.
-    #[arg(long, value_enum, default_value_t = DeviceArg::Cpu)]
-    pub device: DeviceArg,
+    /// Contour method (the key `observation.contour`).
+    #[arg(long, value_enum)]
+    pub contour: Option<Contour>,
+    /// Where the likelihood runs (the key `observation.device`; the GPU scores SPEC's ε̄, so
+    /// `gpu` also sets `observation.short_contour_penalty.enabled=false`).
+    #[arg(long, value_enum)]
+    pub device: Option<DeviceArg>,
     /// Worker threads.
     #[arg(long, default_value_t = 1)]
     pub threads: usize,
@@ -65,13 +76,9 @@ pub struct Args {
     /// PHMM states per action of the generator-trained models.
     #[arg(long, default_value_t = 20)]
     pub states: usize,
-    /// Seed.
+    /// Seed of the sequence, the models and the filter.
     #[arg(long, default_value_t = 7)]
     pub seed: u64,
-    /// Overlap each tracker step with the next frame's edge image, as `track` does (there the
-    /// next frame's decoding joins it); default: the serial order, whose stages add up.
-    #[arg(long)]
-    pub overlap: bool,
     /// Print one JSON object.
     #[arg(long)]
     pub json: bool,
@@ -79,19 +86,8 @@ pub struct Args {
 
 fn print_report(r: &BenchReport) {
     println!(
-        "{} particles, {}×{}, {} view(s), {} contours, {} thread(s), device {}, {}",
-        r.particles,
-        r.width,
-        r.height,
-        r.views,
-        r.contour,
-        r.threads,
-        r.device,
-        if r.overlap {
-            "step overlapped with the next edge image"
-        } else {
-            "serial"
-        }
+        "{} particles, {}×{}, {} view(s), {} contours, {} thread(s), device {}",
+        r.particles, r.width, r.height, r.views, r.contour, r.threads, r.device,
     );
     println!(
         "per frame: median {:.3} ms, p95 {:.3} ms, mean {:.3} ms over {} frames → {:.1} frames/s",
@@ -106,11 +102,7 @@ fn print_report(r: &BenchReport) {
         "real-time budget (30 frames/s = {BUDGET_MS:.1} ms): {verdict}, median at {:.0} % of it",
         100.0 * r.median_ms / BUDGET_MS
     );
-    if r.overlap && r.threads > 1 {
-        println!("stage medians (the edge image runs alongside the other four):");
-    } else {
-        println!("stage medians:");
-    }
+    println!("stage medians:");
     for (name, ms, share) in r.shares() {
         println!("  {name:<30} {ms:>9.3} ms  {share:>5.1} %");
     }
@@ -133,35 +125,53 @@ fn print_report(r: &BenchReport) {
 
 /// Runs `bench`.
 pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
-    if args.particles == 0 || args.frames == 0 || args.threads == 0 || args.views == 0 {
+    if args.frames == 0 || args.threads == 0 || args.views == 0 || args.states < 2 {
         return Err(super::UsageError(
-            "--particles, --frames, --threads and --views must be ≥ 1".into(),
+            "--frames, --threads and --views must be ≥ 1, --states ≥ 2".into(),
         )
         .into());
     }
     if args.width < 16 || args.height < 16 {
         return Err(super::UsageError("--width and --height must be ≥ 16".into()).into());
     }
+    let mut set = args.set.clone();
+    if let Some(c) = args.contour {
+        set.push(format!(
+            "observation.contour={}",
+            match c {
+                Contour::Raster => "raster",
+                Contour::Analytic => "analytic",
+            }
+        ));
+    }
+    if let Some(d) = args.device {
+        let name = match d {
+            DeviceArg::Cpu => "cpu",
+            DeviceArg::Gpu => "gpu",
+            DeviceArg::Auto => "auto",
+        };
+        if name != "cpu" {
+            set.push("observation.short_contour_penalty.enabled=false".into());
+        }
+        set.push(format!("observation.device={name}"));
+    }
+    let config = super::track::build_config(
+        args.config.as_deref(),
+        args.preset.as_deref(),
+        &set,
+        args.particles,
+        Some(args.seed),
+    )?;
     let opts = BenchOptions {
-        particles: args.particles,
+        config,
         width: args.width,
         height: args.height,
         views: args.views,
-        contour: match args.contour {
-            Contour::Raster => ContourMethod::Raster,
-            Contour::Analytic => ContourMethod::Analytic,
-        },
         frames: args.frames,
         warmup: args.warmup,
         threads: args.threads,
         seed: args.seed,
         states: args.states,
-        device: match args.device {
-            DeviceArg::Cpu => Device::Cpu,
-            DeviceArg::Gpu => Device::Gpu,
-            DeviceArg::Auto => Device::Auto,
-        },
-        overlap: args.overlap,
     };
     let report = run_bench(&opts)?;
     if let Some(note) = &report.device_note {

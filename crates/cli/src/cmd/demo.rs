@@ -11,9 +11,9 @@ pub struct Args {
     /// The folder for everything the demo makes.
     #[arg(long, default_value = "actrack-demo")]
     pub dir: PathBuf,
-    /// Particles.
-    #[arg(long, default_value_t = 300)]
-    pub particles: usize,
+    /// Particles (default: the `default` preset's, as `track` uses).
+    #[arg(long)]
+    pub particles: Option<usize>,
     /// Seed of everything.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -23,9 +23,10 @@ pub struct Args {
 pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
     super::track::install_stop_handler();
     let start = std::time::Instant::now();
+    let config = super::track::build_config(None, None, &[], args.particles, Some(args.seed))?;
     let opts = DemoOptions {
         dir: args.dir.clone(),
-        particles: args.particles,
+        config,
         seed: args.seed,
         ..DemoOptions::default()
     };
@@ -62,7 +63,7 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
     );
     println!("{:<34} {:>10.2}", "render test video", r.synth_seconds);
     println!(
-        "{:<34} {:>10.2}   ({:.1} frames/s, {:.1} ms/frame in the filter)",
+        "{:<34} {:>10.2}   ({:.1} frames/s, {:.2} ms/frame in the tracker)",
         "track",
         r.track.seconds,
         frames as f64 / r.track.seconds.max(1e-9),
@@ -78,13 +79,14 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
     );
     println!("reproduce the result by hand:");
     println!(
-        "  actrack-cli track --model {} --scene {} --input {} -o {} --csv {} --particles {} --seed {}",
+        "  actrack-cli track --model {} --scene {} --input {} -o {} --csv {}{} --seed {}",
         shown(&r.model),
         shown(&r.scene),
         shown(&r.frames),
         shown(&r.mcap),
         shown(&r.csv),
-        r.particles,
+        args.particles
+            .map_or_else(String::new, |m| format!(" --particles {m}")),
         r.seed
     );
     println!(

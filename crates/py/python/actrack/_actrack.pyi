@@ -296,23 +296,40 @@ class Estimate:
     @property
     def smoothed_pose(self) -> _F64: ...
 
+_Config = _Path | dict[str, Any]
+_Preset = Literal["default", "paper"]
+
 @final
 class Tracker:
-    """The action-space particle filter of an action model in a scene."""
+    """The tracker of an action model in a scene (``actrack::Session``), one frame at a time.
+
+    The configuration (a ``TrackConfig``, docs/configuration.md) is ``config`` (a TOML file, or
+    a dict of keys over ``preset``) or ``preset`` (``"default"`` when not given), then ``set``
+    (``["key=value", ...]``), then ``n_particles`` (``filter.particles``) and ``seed``
+    (``filter.seed``). An invalid configuration raises :class:`ActrackError` naming the key.
+    ``Estimate.smoothed_pose`` is the causal median; the centred median (``output.median =
+    "centred"``, the default preset's) needs the whole video: :func:`track_video`.
+    """
 
     def __new__(
         cls,
         model: ActionModel,
         scene: Scene,
         *,
-        n_particles: int = 400,
-        seed: int = 0,
-        height_scale: float | None = None,
-        fingertip_floor: float | None = None,
-        action_floor: float | None = None,
+        config: _Config | None = None,
+        preset: _Preset | None = None,
+        n_particles: int | None = None,
+        seed: int | None = None,
+        set: str | Sequence[str] | None = None,
     ) -> Tracker: ...
     @property
     def actions(self) -> list[str]: ...
+    @property
+    def config(self) -> str: ...
+    @property
+    def config_dict(self) -> dict[str, Any]: ...
+    @property
+    def frames(self) -> int: ...
     def step(self, frame: npt.NDArray[np.uint8] | Sequence[npt.NDArray[np.uint8]]) -> Estimate: ...
     def track(self, frames: Iterable[npt.NDArray[np.uint8]]) -> dict[str, npt.NDArray[Any]]: ...
 
@@ -324,10 +341,14 @@ def track_video(
     mcap: _Path | None = None,
     csv: _Path | None = None,
     mcap_images: bool = False,
-    n_particles: int = 400,
-    seed: int = 0,
+    config: _Config | None = None,
+    preset: _Preset | None = None,
+    n_particles: int | None = None,
+    seed: int | None = None,
+    set: str | Sequence[str] | None = None,
     fps: float | None = None,
 ) -> dict[str, Any]: ...
+def centred_median(poses: _ArrayLike, window: int = 7) -> _F64: ...
 def edge_image(
     frame: npt.NDArray[np.uint8],
     *,

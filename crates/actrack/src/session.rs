@@ -1,0 +1,619 @@
+//! [`Session`]: the one per-frame tracking loop (SPEC §3.8). Built from action models, a scene and
+//! a [`TrackConfig`], fed one frame at a time (one image per camera), it yields the per-frame
+//! estimates. `actrack-cli track`, `demo` and `bench`, the Python `Tracker` and the experiments
+//! all drive it.
+//!
+//! Per frame: the edge image of every view (SPEC §4.1, then the configuration's local
+//! normalisation and foreground gate), one filter step in action space scored by the configured
+//! observation model ([`crate::observation`]), the estimates mapped to the world, and the
+//! gate's background updated away from the tracked arm.
+//!
+//! The reported pose's median filter over time runs downstream of the step: causal in the
+//! filter itself, centred in [`PoseReport`], which delays each frame by half its window.
+
+use std::collections::VecDeque;
+use std::sync::Mutex;
+use std::time::Instant;
+
+use actrack_pf::{
+    ActionBalance, CentredMedian, Estimate, ObservationModel, TableRegion, Tracker, TrackerConfig,
+};
+use actrack_render::{
+    ArmGeometry as RenderArm, Camera as RenderCamera, EdgeImage, EdgeWorkspace, ImageView,
+    LikelihoodModel, LocalNorm, LocalNormScratch,
+};
+use image::RgbImage;
+use nalgebra::Vector3;
+
+use crate::config::{FloorSetting, Median, OutputConfig, ThetaPrior, TrackConfig};
+use crate::error::{Error, Result};
+use crate::gate::ForegroundGate;
+use crate::model::ActionModel;
+use crate::observation::{
+    FingertipFloor, Floor, SceneObservation, Scorer, ShortContourPenalty, Timed,
+};
+use crate::scene::{Scene, render_arm, render_camera};
+
+/// The filter's causal median window (SPEC §3.7's recommendation, frames) when the reported
+/// pose is the centred median: the causal one still feeds the gate's background.
+pub const CAUSAL_WINDOW: usize = 5;
+
+/// One frame's result.
+#[derive(Clone, Debug)]
+pub struct FrameResult {
+    /// The filter's estimate (actor frame).
+    pub estimate: Estimate,
+    /// Best particle's pose, world.
+    pub best_world: [f64; 9],
+    /// The causally median-filtered pose, world.
+    pub smoothed_world: [f64; 9],
+    /// θ̄ on the table, world.
+    pub theta_world: Vector3<f64>,
+}
+
+/// Wall-clock milliseconds of the last step's stages.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct StageTimes {
+    /// Edge images of every view (with normalisation and gate).
+    pub edges: f64,
+    /// Resampling (SPEC §3.6).
+    pub resample: f64,
+    /// Propagation, pose sampling and arm correction (SPEC §3.3, §3.4).
+    pub propagate: f64,
+    /// Render + contour + likelihood of every particle in every view (SPEC §4).
+    pub likelihood: f64,
+    /// Weights and estimates (SPEC §3.5, §3.7).
+    pub estimates: f64,
+    /// The foreground gate's background update.
+    pub background: f64,
+    /// The whole step.
+    pub total: f64,
+}
+
+/// The edge stage of one view (buffers reused across frames).
+#[derive(Default)]
+struct ViewStage {
+    ws: EdgeWorkspace,
+    local: LocalNormScratch,
+    spec: EdgeImage,
+    gate: ForegroundGate,
+}
+
+/// The per-video tracking state: edge stages, foreground backgrounds, the filter and its
+/// observation model.
+pub struct Session {
+    scene: Scene,
+    config: TrackConfig,
+    geometry: RenderArm,
+    cameras: Vec<RenderCamera>,
+    scorer: Scorer,
+    device_note: Option<String>,
+    tracker: Tracker,
+    views: Vec<ViewStage>,
+    edges: Vec<EdgeImage>,
+    world: Mutex<Vec<[f64; 9]>>,
+    floor: Option<Floor>,
+    names: Vec<String>,
+    times: StageTimes,
+}
+
+/// The box of every action's training targets, padded by `pad` and clipped to the prior region
+/// `(centre, half_extents)` (actor frame, metres). An action whose padded box misses the region
+/// keeps its padded box.
+pub fn training_theta_regions(
+    model: &ActionModel,
+    pad: f64,
+    region: ([f64; 2], [f64; 2]),
+) -> Vec<TableRegion> {
+    let (rc, rh) = region;
+    model
+        .actions
+        .iter()
+        .map(|a| {
+            let centre = [0, 1].map(|c| 0.5 * (a.theta_min[c] + a.theta_max[c]));
+            let half = [0, 1].map(|c| 0.5 * (a.theta_max[c] - a.theta_min[c]) + pad);
+            let lo = [0, 1].map(|c| centre[c] - half[c]);
+            let hi = [0, 1].map(|c| centre[c] + half[c]);
+            let clipped = (0..2).any(|c| lo[c] < rc[c] - rh[c] || hi[c] > rc[c] + rh[c]);
+            let clo = [0, 1].map(|c| lo[c].max(rc[c] - rh[c]));
+            let chi = [0, 1].map(|c| hi[c].min(rc[c] + rh[c]));
+            if !clipped || !(0..2).all(|c| chi[c] > clo[c]) {
+                TableRegion::new(centre, half)
+            } else {
+                TableRegion::new(
+                    [0, 1].map(|c| 0.5 * (clo[c] + chi[c])),
+                    [0, 1].map(|c| 0.5 * (chi[c] - clo[c])),
+                )
+            }
+        })
+        .collect()
+}
+
+/// The filter's configuration for `model` in `scene`.
+fn tracker_config(model: &ActionModel, scene: &Scene, cfg: &TrackConfig) -> Result<TrackerConfig> {
+    let (centre, half) = scene.theta_region();
+    let f = &cfg.filter;
+    let causal = match cfg.output.median {
+        Median::Causal => cfg.output.median_window,
+        Median::Centred => CAUSAL_WINDOW,
+    };
+    let balance = if f.action_floor > 0.0 {
+        ActionBalance::Mixture(f.action_floor)
+    } else {
+        ActionBalance::Joint
+    };
+    let mut b = TrackerConfig::builder(TableRegion::new(centre, half))
+        .particles(f.particles)
+        .seed(f.seed)
+        .sigma_end_ratio(f.sigma_end_ratio)
+        .speed_range(cfg.speed_range())
+        .median_window(causal)
+        .action_balance(balance);
+    if cfg.prior.theta == ThetaPrior::Training {
+        b = b.action_regions(training_theta_regions(
+            model,
+            cfg.prior.theta_pad,
+            (centre, half),
+        ));
+    }
+    b.build()
+        .map_err(|e| Error::Config(format!("tracker: {e}")))
+}
+
+impl Session {
+    /// A session for `model` in `scene` with `config` (checked here).
+    ///
+    /// # Errors
+    /// [`Error::Config`] naming the key of an invalid configuration, or what does not fit the
+    /// scene or the models.
+    pub fn new(model: &ActionModel, scene: &Scene, config: &TrackConfig) -> Result<Self> {
+        config.check()?;
+        if scene.cameras.is_empty() {
+            return Err(Error::Config("the scene has no camera".into()));
+        }
+        let geometry = render_arm(
+            scene,
+            [model.arm_lengths.upper_arm, model.arm_lengths.forearm_hand],
+        );
+        let cameras: Vec<RenderCamera> = scene.cameras.iter().map(render_camera).collect();
+        let likelihood = LikelihoodModel::new(
+            cameras.clone(),
+            geometry.clone(),
+            config.gamma(cameras.len()),
+            config.observation.contour.into(),
+        )
+        .map_err(|e| Error::Config(format!("observation model: {e}")))?;
+        let (scorer, device_note) = Scorer::new(config.observation.device, likelihood)?;
+        let floor = match config.actor.fingertip_floor {
+            FloorSetting::Off => None,
+            FloorSetting::Table => Some(Floor::new(
+                scene.table_height(),
+                config.actor.floor_sigma,
+            )?),
+            FloorSetting::Height(z) => Some(Floor::new(z, config.actor.floor_sigma)?),
+        };
+        let names: Vec<String> = model.actions.iter().map(|a| a.name.clone()).collect();
+        #[allow(clippy::float_cmp)] // exactly 1: the trained models, bit for bit
+        let scale = (config.prior.height_scale != 1.0).then_some(config.prior.height_scale);
+        let phmms = model.tracking_phmms_scaled(config.dwell_cap(), scale)?;
+        let tracker = Tracker::new(
+            phmms.iter(),
+            names.clone(),
+            tracker_config(model, scene, config)?,
+        )
+        .map_err(|e| Error::Model {
+            context: "building the tracker".into(),
+            message: e.to_string(),
+        })?;
+        Ok(Self {
+            scene: scene.clone(),
+            config: config.clone(),
+            geometry,
+            views: cameras.iter().map(|_| ViewStage::default()).collect(),
+            edges: cameras.iter().map(|_| EdgeImage::default()).collect(),
+            cameras,
+            scorer,
+            device_note,
+            tracker,
+            world: Mutex::new(Vec::with_capacity(config.filter.particles)),
+            floor,
+            names,
+            times: StageTimes::default(),
+        })
+    }
+
+    /// Action names.
+    pub fn action_names(&self) -> &[String] {
+        &self.names
+    }
+
+    /// The filter (particles, weights).
+    pub fn tracker(&self) -> &Tracker {
+        &self.tracker
+    }
+
+    /// The arm geometry used for rendering.
+    pub fn geometry(&self) -> &RenderArm {
+        &self.geometry
+    }
+
+    /// The scene.
+    pub fn scene(&self) -> &Scene {
+        &self.scene
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &TrackConfig {
+        &self.config
+    }
+
+    /// `cpu` or `gpu`: where the likelihood runs.
+    pub fn device(&self) -> &'static str {
+        self.scorer.device()
+    }
+
+    /// A note on the device choice (`observation.device = auto` fell back), if any.
+    pub fn device_note(&self) -> Option<&str> {
+        self.device_note.as_deref()
+    }
+
+    /// The stage times of the last step.
+    pub fn last_times(&self) -> StageTimes {
+        self.times
+    }
+
+    /// The edge images of the last step, one per view.
+    pub fn edges(&self) -> &[EdgeImage] {
+        &self.edges
+    }
+
+    /// One step on RGB images, one per camera of the scene.
+    ///
+    /// # Errors
+    /// As [`Session::step`].
+    pub fn step_rgb(&mut self, frame: usize, images: &[&RgbImage]) -> Result<FrameResult> {
+        let views = images
+            .iter()
+            .map(|img| {
+                ImageView::rgb8(img.as_raw(), img.width(), img.height())
+                    .map_err(|e| Error::Config(format!("frame {frame}: {e}")))
+            })
+            .collect::<Result<Vec<_>>>()?;
+        self.step(frame, &views)
+    }
+
+    /// One step on synchronised images, one per camera of the scene, in the scene's order.
+    ///
+    /// # Errors
+    /// [`Error::Config`] naming the frame when the number of images is not the number of
+    /// cameras or an image does not fit its camera.
+    pub fn step(&mut self, frame: usize, images: &[ImageView<'_>]) -> Result<FrameResult> {
+        let t0 = Instant::now();
+        if images.len() != self.cameras.len() {
+            return Err(Error::Config(format!(
+                "frame {frame}: {} image(s) for a scene of {} camera(s): every camera needs its \
+                 view of the frame",
+                images.len(),
+                self.cameras.len()
+            )));
+        }
+        let obs_cfg = &self.config.observation;
+        for (v, img) in images.iter().enumerate() {
+            let cam = &self.scene.cameras[v];
+            if img.size() != (cam.width, cam.height) {
+                return Err(Error::Config(format!(
+                    "frame {frame}: the image is {}×{} but camera `{}` of the scene is {}×{}",
+                    img.size().0,
+                    img.size().1,
+                    cam.name,
+                    cam.width,
+                    cam.height
+                )));
+            }
+            let err = |e: actrack_render::RenderError| Error::Config(format!("frame {frame}: {e}"));
+            let params = self.scene.edge_params(cam.width);
+            let stage = &mut self.views[v];
+            if obs_cfg.local_norm.enabled {
+                stage
+                    .ws
+                    .compute_into(*img, &params, &mut stage.spec)
+                    .map_err(err)?;
+                let ln = LocalNorm {
+                    radius: obs_cfg.local_norm.radius,
+                    floor: obs_cfg.local_norm.floor,
+                };
+                actrack_render::local_normalise(
+                    &stage.spec,
+                    &ln,
+                    &mut stage.local,
+                    &mut self.edges[v],
+                )
+                .map_err(err)?;
+            } else {
+                stage
+                    .ws
+                    .compute_into(*img, &params, &mut self.edges[v])
+                    .map_err(err)?;
+            }
+            if obs_cfg.foreground_gate.enabled {
+                stage
+                    .gate
+                    .apply(&obs_cfg.foreground_gate, *img, &mut self.edges[v])
+                    .map_err(|e| Error::Config(format!("frame {frame}: {e}")))?;
+            }
+        }
+        let edges_ms = t0.elapsed().as_secs_f64() * 1e3;
+        let (estimate, stages) = self.filter();
+        let r = FrameResult {
+            best_world: self.scene.pose_to_world(&estimate.best_pose),
+            smoothed_world: self.scene.pose_to_world(&estimate.smoothed_pose),
+            theta_world: self.scene.theta_to_world(estimate.theta_mean),
+            estimate,
+        };
+        let t1 = Instant::now();
+        let gate = &self.config.observation.foreground_gate;
+        if gate.enabled {
+            let tracked = [&r.best_world, &r.smoothed_world];
+            for ((img, cam), stage) in images.iter().zip(&self.cameras).zip(&mut self.views) {
+                stage
+                    .gate
+                    .update(gate, *img, cam, &self.geometry, &tracked)
+                    .map_err(|e| Error::Config(format!("frame {frame}: {e}")))?;
+            }
+        }
+        let background = t1.elapsed().as_secs_f64() * 1e3;
+        self.times = StageTimes {
+            edges: edges_ms,
+            resample: stages[0],
+            propagate: stages[1],
+            likelihood: stages[2],
+            estimates: stages[3],
+            background,
+            total: t0.elapsed().as_secs_f64() * 1e3,
+        };
+        Ok(r)
+    }
+
+    /// One filter step on the current edge images with the configured observation model.
+    fn filter(&mut self) -> (Estimate, [f64; 4]) {
+        let pen = &self.config.observation.short_contour_penalty;
+        match (&self.scorer, pen.enabled) {
+            (Scorer::Cpu(likelihood), true) => {
+                let obs = ShortContourPenalty::new(
+                    &self.scene,
+                    likelihood,
+                    &self.edges,
+                    pen.weight,
+                    pen.quantile,
+                );
+                timed_step(&mut self.tracker, obs, self.floor)
+            }
+            _ => {
+                let obs = SceneObservation::new(
+                    &self.scene,
+                    &self.geometry,
+                    &self.scorer,
+                    &self.edges,
+                    &self.world,
+                );
+                timed_step(&mut self.tracker, obs, self.floor)
+            }
+        }
+    }
+}
+
+/// One filter step on `obs` (under the floor, if any) with its stage times.
+fn timed_step<O: ObservationModel>(
+    tracker: &mut Tracker,
+    obs: O,
+    floor: Option<Floor>,
+) -> (Estimate, [f64; 4]) {
+    match floor {
+        Some(f) => {
+            let t = Timed::new(FingertipFloor::new(obs, f));
+            let e = tracker.step(&t);
+            (e, t.stages())
+        }
+        None => {
+            let t = Timed::new(obs);
+            let e = tracker.step(&t);
+            (e, t.stages())
+        }
+    }
+}
+
+/// The reported pose of each frame (SPEC §3.7): with a causal median, the filter's own
+/// (known at once); with a centred one of window 2h + 1, the median of the best particle's
+/// poses of frames t − h … t + h, so each frame leaves h frames after it came in (the last h at
+/// [`PoseReport::finish`]). `T` is whatever travels with a frame to the outputs.
+pub struct PoseReport<T> {
+    centred: Option<CentredMedian>,
+    waiting: VecDeque<T>,
+}
+
+impl<T> PoseReport<T> {
+    /// The report of `output`'s median.
+    ///
+    /// # Errors
+    /// [`Error::Config`] for an even centred window.
+    pub fn new(output: &OutputConfig) -> Result<Self> {
+        let centred = match output.median {
+            Median::Centred => Some(
+                CentredMedian::new(output.median_window)
+                    .map_err(|e| Error::Config(format!("output.median_window: {e}")))?,
+            ),
+            Median::Causal => None,
+        };
+        Ok(Self {
+            centred,
+            waiting: VecDeque::new(),
+        })
+    }
+
+    /// Feeds a tracked frame (its payload and estimate); returns the frame now complete, if
+    /// any, with its reported pose (actor frame).
+    pub fn push(&mut self, item: T, estimate: &Estimate) -> Option<(T, [f64; 9])> {
+        match self.centred.as_mut() {
+            None => Some((item, estimate.smoothed_pose)),
+            Some(c) => {
+                self.waiting.push_back(item);
+                let pose = c.push(estimate.best_pose)?;
+                self.waiting.pop_front().map(|t| (t, pose))
+            }
+        }
+    }
+
+    /// The frames still waiting at the end of the video, with their reported poses.
+    pub fn finish(&mut self) -> Vec<(T, [f64; 9])> {
+        match self.centred.as_mut() {
+            None => Vec::new(),
+            Some(c) => c.finish().into_iter().zip(self.waiting.drain(..)).map(|(p, t)| (t, p)).collect(),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::FloorSetting;
+    use crate::demo::train_generator_model;
+    use crate::scene::default_scene;
+    use crate::synth::{MotionSource, random_targets, render_frames, sequence};
+
+    struct Small {
+        scene: Scene,
+        model: ActionModel,
+        frames: Vec<RgbImage>,
+    }
+
+    fn small() -> Small {
+        let scene = default_scene(160, 120);
+        let (model, _) = train_generator_model(&scene, &["point", "push"], 2, 8, 3).unwrap();
+        let targets = random_targets(&scene, &["point", "push"], 4);
+        let seq = sequence(&scene, MotionSource::Generator, &targets, 30.0, 5).unwrap();
+        let world: Vec<[f64; 9]> = seq.truth.rows.iter().take(24).map(|r| r.pose).collect();
+        let frames = render_frames(&scene, &world, seq.lengths, 6).unwrap();
+        let frames = frames
+            .into_iter()
+            .map(|f| RgbImage::from_raw(f.width, f.height, f.data).unwrap())
+            .collect();
+        Small {
+            scene,
+            model,
+            frames,
+        }
+    }
+
+    fn run(s: &Small, config: &TrackConfig) -> Vec<FrameResult> {
+        let mut session = Session::new(&s.model, &s.scene, config).unwrap();
+        s.frames
+            .iter()
+            .enumerate()
+            .map(|(i, f)| session.step_rgb(i, &[f]).unwrap())
+            .collect()
+    }
+
+    fn config(set: &[&str]) -> TrackConfig {
+        let mut c = TrackConfig::default();
+        c.set("filter.particles=120").unwrap();
+        for kv in set {
+            c.set(kv).unwrap();
+        }
+        c
+    }
+
+    fn best(r: &[FrameResult]) -> Vec<[f64; 9]> {
+        r.iter().map(|x| x.best_world).collect()
+    }
+
+    #[test]
+    fn every_key_of_the_method_changes_the_track_and_stays_finite() {
+        let s = small();
+        let base = run(&s, &config(&[]));
+        assert_eq!(best(&base), best(&run(&s, &config(&[]))), "deterministic");
+        for kv in [
+            "observation.short_contour_penalty.enabled=false",
+            "observation.foreground_gate.enabled=false",
+            "observation.local_norm.enabled=true",
+            "actor.fingertip_floor=off",
+            "filter.max_stay=1.0",
+            "filter.action_floor=0.25",
+            "prior.theta=\"scene\"",
+            "observation.contour=\"raster\"",
+            "prior.height_scale=0.9",
+        ] {
+            let other = run(&s, &config(&[kv]));
+            assert_ne!(best(&other), best(&base), "{kv} changed nothing");
+            for r in &other {
+                assert!(r.best_world.iter().all(|v| v.is_finite()), "{kv}");
+                assert!(r.estimate.action_posterior.iter().all(|p| p.is_finite()));
+            }
+        }
+        // The paper's preset runs too.
+        let mut paper = TrackConfig::preset("paper").unwrap();
+        paper.filter.particles = 120;
+        assert_eq!(run(&s, &paper).len(), s.frames.len());
+    }
+
+    #[test]
+    fn the_table_floor_is_the_scenes_table_height() {
+        let s = small();
+        let z = s.scene.table_height();
+        let table = run(&s, &config(&["actor.fingertip_floor=\"table\""]));
+        let given = run(&s, &config(&[&format!("actor.fingertip_floor={z}")]));
+        assert_eq!(best(&table), best(&given));
+        let c = config(&[]);
+        assert_eq!(c.actor.fingertip_floor, FloorSetting::Table);
+    }
+
+    #[test]
+    fn images_that_do_not_fit_the_scene_name_the_frame() {
+        let s = small();
+        let mut session = Session::new(&s.model, &s.scene, &config(&[])).unwrap();
+        let e = session.step_rgb(3, &[]).unwrap_err().to_string();
+        assert!(e.contains("frame 3") && e.contains("1 camera"), "{e}");
+        let e = session
+            .step_rgb(4, &[&s.frames[0], &s.frames[1]])
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("frame 4") && e.contains("2 image"), "{e}");
+        let wrong = RgbImage::new(100, 100);
+        let e = session.step_rgb(5, &[&wrong]).unwrap_err().to_string();
+        assert!(e.contains("frame 5") && e.contains("100×100"), "{e}");
+        let mut bad = config(&[]);
+        bad.filter.particles = 0;
+        let e = Session::new(&s.model, &s.scene, &bad)
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(e.contains("filter.particles"), "{e}");
+    }
+
+    #[test]
+    fn the_centred_report_is_the_centred_median_of_the_best_poses() {
+        let s = small();
+        let c = config(&["output.median=\"centred\"", "output.median_window=5"]);
+        let results = run(&s, &c);
+        let mut report = PoseReport::new(&c.output).unwrap();
+        let mut out = Vec::new();
+        for (i, r) in results.iter().enumerate() {
+            if let Some((j, pose)) = report.push(i, &r.estimate) {
+                assert_eq!(j + 2, i, "frames leave two frames later");
+                out.push((j, pose));
+            }
+        }
+        out.extend(report.finish());
+        let frames: Vec<usize> = out.iter().map(|x| x.0).collect();
+        assert_eq!(frames, (0..results.len()).collect::<Vec<_>>());
+        let bests: Vec<[f64; 9]> = results.iter().map(|r| r.estimate.best_pose).collect();
+        let expected = actrack_pf::centred_median(&bests, 5).unwrap();
+        let got: Vec<[f64; 9]> = out.iter().map(|x| x.1).collect();
+        assert_eq!(got, expected);
+        // Causal: each frame at once with the filter's own median.
+        let causal = config(&["output.median=\"causal\"", "output.median_window=5"]);
+        let mut report = PoseReport::new(&causal.output).unwrap();
+        let (i, pose) = report.push(7usize, &results[0].estimate).unwrap();
+        assert_eq!((i, pose), (7, results[0].estimate.smoothed_pose));
+        assert!(report.finish().is_empty());
+    }
+}

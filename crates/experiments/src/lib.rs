@@ -1,0 +1,5 @@
+//! Experiments of the actrack project, outside the library: the paper's experiment on real
+//! motion ([`reproduce`]), whose conditions are [`actrack::TrackConfig`]s plus the rendering
+//! conditions, each video tracked by [`actrack::Session`].
+
+pub mod reproduce;
