@@ -6,10 +6,10 @@
 
 use std::sync::atomic::AtomicBool;
 
+use actrack::TrackConfig;
 use actrack::demo::train_generator_model;
 use actrack::eval::evaluate;
 use actrack::frames::{FrameOptions, FrameSource};
-use actrack::TrackConfig;
 use actrack::pipeline::{TrackOutputs, track};
 use actrack::scene::default_scene;
 use actrack::synth::{MotionSource, random_targets, render_frames, save_frames, sequence};

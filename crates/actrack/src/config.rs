@@ -435,9 +435,9 @@ impl TrackConfig {
     /// in messages.
     pub fn parse(text: &str, path: &std::path::Path) -> Result<Self> {
         let cfg: Self = toml::from_str(text).map_err(|e| {
-            let line = e
-                .span()
-                .map_or(1, |s| text[..s.start.min(text.len())].matches('\n').count() + 1);
+            let line = e.span().map_or(1, |s| {
+                text[..s.start.min(text.len())].matches('\n').count() + 1
+            });
             Error::parse(path, line, e.message().to_string())
         })?;
         cfg.check()
@@ -737,7 +737,10 @@ mod tests {
 
     #[test]
     fn the_default_preset_is_the_default() {
-        assert_eq!(TrackConfig::preset("default").unwrap(), TrackConfig::default());
+        assert_eq!(
+            TrackConfig::preset("default").unwrap(),
+            TrackConfig::default()
+        );
     }
 
     #[test]
@@ -792,7 +795,10 @@ mod tests {
             ("filter.action_floor=1.5", "filter.action_floor"),
             ("filter.max_stay=-0.1", "filter.max_stay"),
             ("observation.short_contour_penalty.quantile=2", "quantile"),
-            ("observation.foreground_gate.floor=1.2", "foreground_gate.floor"),
+            (
+                "observation.foreground_gate.floor=1.2",
+                "foreground_gate.floor",
+            ),
             ("filter.nonsense=3", "nonsense"),
             ("output.median_window=4", "output.median_window"),
             ("filter=3", "filter"),
@@ -801,15 +807,22 @@ mod tests {
             let mut c = TrackConfig::default();
             let e = c.set(set).expect_err(set).to_string();
             assert!(e.contains(needle), "{set}: {e}");
-            assert_eq!(c, TrackConfig::default(), "{set} left the configuration alone");
+            assert_eq!(
+                c,
+                TrackConfig::default(),
+                "{set} left the configuration alone"
+            );
         }
     }
 
     #[test]
     fn unknown_keys_in_a_file_are_errors_with_a_line() {
-        let e = TrackConfig::parse("[filter]\nparticles = 10\nparticels = 3\n", "c.toml".as_ref())
-            .unwrap_err()
-            .to_string();
+        let e = TrackConfig::parse(
+            "[filter]\nparticles = 10\nparticels = 3\n",
+            "c.toml".as_ref(),
+        )
+        .unwrap_err()
+        .to_string();
         assert!(e.contains("c.toml:3") && e.contains("particels"), "{e}");
         let e = TrackConfig::parse("[filter]\nparticles = 0\n", "c.toml".as_ref())
             .unwrap_err()

@@ -13,12 +13,12 @@ use rand::SeedableRng;
 use rand_pcg::Pcg64Mcg;
 use rayon::prelude::*;
 
+use crate::config::TrackConfig;
 use crate::error::{Error, Result};
 use crate::eval::{EvalReport, evaluate};
 use crate::frames::{FrameOptions, FrameSource};
 use crate::model::{Action, ActionModel, ArmLengths, Provenance, THETA_FRAME};
 use crate::motion::{ACTIONS, demonstrations};
-use crate::config::TrackConfig;
 use crate::pipeline::{TrackOutputs, TrackSummary, track};
 use crate::scene::{Scene, default_scene};
 use crate::synth::{

@@ -37,13 +37,17 @@ impl ForegroundGate {
     ///
     /// # Errors
     /// When `view`, the background and `g` differ in size.
-    pub fn apply(&mut self, cfg: &GateConfig, view: ImageView<'_>, g: &mut EdgeImage) -> Result<()> {
+    pub fn apply(
+        &mut self,
+        cfg: &GateConfig,
+        view: ImageView<'_>,
+        g: &mut EdgeImage,
+    ) -> Result<()> {
         let (w, h) = view.size();
         if self.background.is_empty() {
             actrack_render::grey_image(view, &mut self.chan, &mut self.background);
         }
-        if self.background.len() != w as usize * h as usize || g.width() != w || g.height() != h
-        {
+        if self.background.len() != w as usize * h as usize || g.width() != w || g.height() != h {
             return Err(Error::Config(format!(
                 "foreground gate: a {w}×{h} frame against a background of {} pixels",
                 self.background.len()

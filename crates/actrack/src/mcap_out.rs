@@ -396,10 +396,7 @@ impl TrackWriter {
     pub fn write_config(&mut self, config: &crate::config::TrackConfig) -> Result<()> {
         let mut metadata = BTreeMap::new();
         metadata.insert("toml".to_string(), config.to_toml());
-        metadata.insert(
-            "version".to_string(),
-            env!("CARGO_PKG_VERSION").to_string(),
-        );
+        metadata.insert("version".to_string(), env!("CARGO_PKG_VERSION").to_string());
         self.w
             .write_metadata(&mcap::records::Metadata {
                 name: "actrack.config".into(),

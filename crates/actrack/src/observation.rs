@@ -216,7 +216,11 @@ impl ObservationModel for ShortContourPenalty<'_> {
             }
         }
         // Views without an image count as "no contour" (SPEC's missing view).
-        let missing = self.likelihood.cameras().len().saturating_sub(self.edges.len()) as f64;
+        let missing = self
+            .likelihood
+            .cameras()
+            .len()
+            .saturating_sub(self.edges.len()) as f64;
         if missing > 0.0 {
             for o in out.iter_mut() {
                 *o -= missing * factor;

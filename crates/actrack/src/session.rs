@@ -186,10 +186,9 @@ impl Session {
         let (scorer, device_note) = Scorer::new(config.observation.device, likelihood)?;
         let floor = match config.actor.fingertip_floor {
             FloorSetting::Off => None,
-            FloorSetting::Table => Some(Floor::new(
-                scene.table_height(),
-                config.actor.floor_sigma,
-            )?),
+            FloorSetting::Table => {
+                Some(Floor::new(scene.table_height(), config.actor.floor_sigma)?)
+            }
             FloorSetting::Height(z) => Some(Floor::new(z, config.actor.floor_sigma)?),
         };
         let names: Vec<String> = model.actions.iter().map(|a| a.name.clone()).collect();
@@ -467,7 +466,12 @@ impl<T> PoseReport<T> {
     pub fn finish(&mut self) -> Vec<(T, [f64; 9])> {
         match self.centred.as_mut() {
             None => Vec::new(),
-            Some(c) => c.finish().into_iter().zip(self.waiting.drain(..)).map(|(p, t)| (t, p)).collect(),
+            Some(c) => c
+                .finish()
+                .into_iter()
+                .zip(self.waiting.drain(..))
+                .map(|(p, t)| (t, p))
+                .collect(),
         }
     }
 }

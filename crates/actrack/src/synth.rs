@@ -15,8 +15,8 @@ use rayon::prelude::*;
 use crate::error::{Error, Result};
 use crate::model::ActionModel;
 use crate::motion::{MotionParams, generate};
-use crate::scene::{render_arm, render_camera};
 use crate::scene::Scene;
+use crate::scene::{render_arm, render_camera};
 use crate::track_csv::{TrajRow, Trajectory};
 
 /// Where the movements come from.

@@ -140,7 +140,11 @@ fn track_writes_valid_mcap_and_csv_then_eval() {
             .arg(f.root.join("t.mcap"))
             .output()
             .unwrap();
-        assert!(meta.status.success(), "{}", String::from_utf8_lossy(&meta.stderr));
+        assert!(
+            meta.status.success(),
+            "{}",
+            String::from_utf8_lossy(&meta.stderr)
+        );
         let text = String::from_utf8_lossy(&meta.stdout);
         let cfg = actrack::TrackConfig::parse(&text, Path::new("metadata")).unwrap();
         assert_eq!(cfg.filter.particles, 60);
@@ -193,7 +197,14 @@ fn centred_median_writes_every_frame_in_order() {
     ok(track(
         &f.root,
         "video/frames",
-        &["--csv", "causal.csv", "--set", "output.median=causal", "--set", "output.median_window=5"],
+        &[
+            "--csv",
+            "causal.csv",
+            "--set",
+            "output.median=causal",
+            "--set",
+            "output.median_window=5",
+        ],
         None,
     ));
     let args = [
@@ -212,7 +223,9 @@ fn centred_median_writes_every_frame_in_order() {
         .unwrap()
         .count();
     assert_eq!(
-        std::fs::read_dir(f.root.join("ov-centred")).unwrap().count(),
+        std::fs::read_dir(f.root.join("ov-centred"))
+            .unwrap()
+            .count(),
         n
     );
     let load = |name: &str| actrack::track_csv::Trajectory::load(&f.root.join(name)).unwrap();
@@ -222,7 +235,12 @@ fn centred_median_writes_every_frame_in_order() {
     assert_eq!(causal.rows.len(), n);
     let mut differs = 0;
     for (a, b) in causal.rows.iter().zip(&centred.rows) {
-        assert_eq!((&a.action, a.theta), (&b.action, b.theta), "frame {}", a.frame);
+        assert_eq!(
+            (&a.action, a.theta),
+            (&b.action, b.theta),
+            "frame {}",
+            a.frame
+        );
         assert!(b.pose.iter().all(|v| v.is_finite()));
         differs += usize::from(a.pose != b.pose);
     }
@@ -392,13 +410,21 @@ fn bad_input_names_the_frame_with_exit_code_2() {
         ("observation.gamma=0", &["observation.gamma"]),
         ("actor.floor_sigma=-0.01", &["actor.floor_sigma"]),
         ("filter.action_floor=1.5", &["filter.action_floor", "1.5"]),
-        ("observation.short_contour_penalty.quantile=2", &["quantile"]),
+        (
+            "observation.short_contour_penalty.quantile=2",
+            &["quantile"],
+        ),
         ("output.median_window=4", &["output.median_window", "odd"]),
         ("filter.particels=10", &["particels", "unknown"]),
     ];
     for (set, needles) in bad_sets {
         expect_input_error(
-            &track(&f.root, "video/frames", &["--csv", "x.csv", "--set", set], None),
+            &track(
+                &f.root,
+                "video/frames",
+                &["--csv", "x.csv", "--set", set],
+                None,
+            ),
             needles,
         );
     }

@@ -13,9 +13,7 @@ use std::process::Command;
 use actrack::manifest::{Manifest, TrainOptions};
 use actrack::mocap::ArmSide;
 use actrack::train::{fit_actions, import_manifest};
-use actrack_experiments::reproduce::{
-    ConditionSpec, export_trial, run_condition, test_trials,
-};
+use actrack_experiments::reproduce::{ConditionSpec, export_trial, run_condition, test_trials};
 
 const BIN: &str = env!("CARGO_BIN_EXE_actrack-cli");
 
@@ -83,7 +81,10 @@ fn experiment_and_track_write_the_same_csv() {
 
     let dir = tempfile::tempdir().unwrap();
     let run = export_trial(&model, &held_out[0], &cond, dir.path()).unwrap();
-    assert_eq!(run.track, runs[0].track, "export tracks as run_condition does");
+    assert_eq!(
+        run.track, runs[0].track,
+        "export tracks as run_condition does"
+    );
     let out = Command::new(BIN)
         .args([
             "track",

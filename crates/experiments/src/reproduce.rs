@@ -281,7 +281,12 @@ pub struct Condition {
 impl Condition {
     /// The tracking configuration of a video of `subject` ([`ActorHeight::Rest`] sets
     /// `prior.height_scale` from the rest heights).
-    pub fn config_for(&self, subject: &str, rest: &BTreeMap<String, f64>, models: f64) -> TrackConfig {
+    pub fn config_for(
+        &self,
+        subject: &str,
+        rest: &BTreeMap<String, f64>,
+        models: f64,
+    ) -> TrackConfig {
         let mut c = self.track.clone();
         c.filter.seed = self.seed;
         if self.actor_height == ActorHeight::Rest
@@ -672,7 +677,15 @@ pub fn run_condition(
         .map(|t| {
             let (scene, config) =
                 subject_setup(model, cond, &t.subject, &lengths, &rest, t.lengths)?;
-            run_video(model, &scene, &[Segment::from(t)], cond, &config, &[], false)
+            run_video(
+                model,
+                &scene,
+                &[Segment::from(t)],
+                cond,
+                &config,
+                &[],
+                false,
+            )
         })
         .collect::<Result<_>>()?;
     let res = summarise(cond, model, &runs, t0.elapsed().as_secs_f64())?;
@@ -797,7 +810,6 @@ pub fn two_action_label(a: &str) -> String {
         a.to_string()
     }
 }
-
 
 /// Tracks `trial` under `cond` as [`run_condition`] does and writes what `actrack-cli track`
 /// needs to track it again into `dir`: `frames/` (PNG, lossless), `scene.toml`, `config.toml`

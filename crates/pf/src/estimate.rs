@@ -592,7 +592,9 @@ mod tests {
         // A deterministic pseudo-random sequence with repeated values and outliers.
         let mut x: u64 = 12345;
         let mut next = || {
-            x = x.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            x = x
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             ((x >> 33) % 1000) as f64 / 100.0 - 5.0
         };
         let poses: Vec<[f64; 9]> = (0..40).map(|_| std::array::from_fn(|_| next())).collect();
@@ -600,7 +602,11 @@ mod tests {
             for n in [0, 1, 2, 3, 4, 7, 40] {
                 let seq = &poses[..n];
                 let got = centred_median(seq, window).unwrap();
-                assert_eq!(got, centred_brute(seq, window), "window {window}, {n} frames");
+                assert_eq!(
+                    got,
+                    centred_brute(seq, window),
+                    "window {window}, {n} frames"
+                );
             }
         }
         assert_eq!(centred_median(&poses, 1).unwrap(), poses);
@@ -641,7 +647,10 @@ mod tests {
     fn centred_median_rejects_even_windows() {
         for w in [0, 2, 4] {
             let e = CentredMedian::new(w).unwrap_err().to_string();
-            assert!(e.contains("odd window") && e.contains(&w.to_string()), "{e}");
+            assert!(
+                e.contains("odd window") && e.contains(&w.to_string()),
+                "{e}"
+            );
             assert!(centred_median(&[[0.0; 9]], w).is_err());
         }
     }

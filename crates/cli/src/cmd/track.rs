@@ -4,8 +4,8 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use actrack::frames::{FrameOptions, FrameSource};
 use actrack::TrackConfig;
+use actrack::frames::{FrameOptions, FrameSource};
 use actrack::model::ActionModel;
 use actrack::pipeline::{TrackOutputs, track};
 use actrack::scene::Scene;
@@ -103,7 +103,8 @@ pub fn build_config(
         overrides.push(format!("filter.seed={s}"));
     }
     for kv in &overrides {
-        cfg.set(kv).map_err(|e| super::UsageError(format!("--set {kv}: {e}")))?;
+        cfg.set(kv)
+            .map_err(|e| super::UsageError(format!("--set {kv}: {e}")))?;
     }
     Ok(cfg)
 }

@@ -201,10 +201,7 @@ fn long_videos(
         })
         .collect::<Result<_, _>>()?;
     let all: Vec<VideoRun> = runs.iter().map(|(_, r)| r.clone()).collect();
-    Ok((
-        summarise(cond, m, &all, t0.elapsed().as_secs_f64())?,
-        runs,
-    ))
+    Ok((summarise(cond, m, &all, t0.elapsed().as_secs_f64())?, runs))
 }
 
 fn main() -> Res<()> {
@@ -254,7 +251,9 @@ fn main() -> Res<()> {
         conditions.retain(|c| c.name.contains(only.as_str()));
     }
     if let Some(name) = &a.export {
-        let c = conditions.first().ok_or("--export: no condition selected")?;
+        let c = conditions
+            .first()
+            .ok_or("--export: no condition selected")?;
         let (m, tr) = match c.model {
             ModelKind::Two => (&m2, &trials2),
             ModelKind::Three => (&m3, &trials3),
@@ -264,7 +263,11 @@ fn main() -> Res<()> {
             .find(|t| t.name == *name)
             .ok_or_else(|| format!("--export: no trial {name}"))?;
         export_trial(m, t, c, &a.export_dir)?;
-        eprintln!("exported {name} under `{}` to {}", c.name, a.export_dir.display());
+        eprintln!(
+            "exported {name} under `{}` to {}",
+            c.name,
+            a.export_dir.display()
+        );
         return Ok(());
     }
     let mut results: Vec<ConditionResult> = Vec::new();
@@ -402,7 +405,10 @@ fn write_docs(
     md.push_str("## Headline (held-out subjects)\n\n");
     md.push_str(HEAD);
     md.push_str(PAPER);
-    for r in results.iter().filter(|r| r.condition.group == "main" || r.condition.group == "long") {
+    for r in results
+        .iter()
+        .filter(|r| r.condition.group == "main" || r.condition.group == "long")
+    {
         md.push_str(&row(r));
         md.push('\n');
     }
@@ -413,14 +419,23 @@ fn write_docs(
     md.push_str(HEAD);
     let seeded: Vec<&ConditionResult> = results
         .iter()
-        .filter(|r| results.iter().any(|s| s.condition.group == "seeds" && s.condition.name.starts_with(&format!("{}, seed", r.condition.name))))
+        .filter(|r| {
+            results.iter().any(|s| {
+                s.condition.group == "seeds"
+                    && s.condition
+                        .name
+                        .starts_with(&format!("{}, seed", r.condition.name))
+            })
+        })
         .collect();
     for base in &seeded {
         md.push_str(&row(base));
         md.push('\n');
         for s in results.iter().filter(|s| {
             s.condition.group == "seeds"
-                && s.condition.name.starts_with(&format!("{}, seed", base.condition.name))
+                && s.condition
+                    .name
+                    .starts_with(&format!("{}, seed", base.condition.name))
         }) {
             md.push_str(&row(s));
             md.push('\n');
@@ -431,7 +446,9 @@ fn write_docs(
         let mut all = vec![*base];
         all.extend(results.iter().filter(|s| {
             s.condition.group == "seeds"
-                && s.condition.name.starts_with(&format!("{}, seed", base.condition.name))
+                && s.condition
+                    .name
+                    .starts_with(&format!("{}, seed", base.condition.name))
         }));
         let (rm, rl, rh) = spread(&all, |r| r.report.overall.rmse);
         let (tm, tl, th) = spread(&all, |r| r.report.table_error);
@@ -469,9 +486,7 @@ fn write_docs(
         md.push('\n');
     }
     if !figs.is_empty() {
-        md.push_str(
-            "## Figures (the first subject's long video, default configuration)\n\n",
-        );
+        md.push_str("## Figures (the first subject's long video, default configuration)\n\n");
         for f in figs {
             let name = f.file_name().and_then(|n| n.to_str()).unwrap_or("");
             let _ = writeln!(md, "![{name}](results/{name})\n");
