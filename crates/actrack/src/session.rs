@@ -497,10 +497,6 @@ mod tests {
         let seq = sequence(&scene, MotionSource::Generator, &targets, 30.0, 5).unwrap();
         let world: Vec<[f64; 9]> = seq.truth.rows.iter().take(24).map(|r| r.pose).collect();
         let frames = render_frames(&scene, &world, seq.lengths, 6).unwrap();
-        let frames = frames
-            .into_iter()
-            .map(|f| RgbImage::from_raw(f.width, f.height, f.data).unwrap())
-            .collect();
         Small {
             scene,
             model,
