@@ -27,7 +27,7 @@ pub const PRESETS: [(&str, &str); 2] = [
 pub const MAX_PARTICLES: usize = 1 << 20;
 
 /// Every choice that changes a track.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct TrackConfig {
     /// The particle filter in action space (SPEC §3).
@@ -282,18 +282,6 @@ pub enum Median {
     /// Frames t − h … t + h.
     #[default]
     Centred,
-}
-
-impl Default for TrackConfig {
-    fn default() -> Self {
-        Self {
-            filter: FilterConfig::default(),
-            prior: PriorConfig::default(),
-            observation: ObservationConfig::default(),
-            actor: ActorConfig::default(),
-            output: OutputConfig::default(),
-        }
-    }
 }
 
 // The defaults below are the `default` preset (presets/default.toml); a unit test checks

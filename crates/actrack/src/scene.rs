@@ -759,6 +759,51 @@ pub fn default_scene(width: u32, height: u32) -> Scene {
     }
 }
 
+/// Converts a scene camera to the renderer's.
+pub fn render_camera(c: &Camera) -> actrack_render::Camera {
+    let r = c.r_cw;
+    actrack_render::Camera {
+        width: c.width,
+        height: c.height,
+        fx: c.fx,
+        fy: c.fy,
+        cx: c.cx,
+        cy: c.cy,
+        distortion: c.distortion,
+        rotation: [0, 1, 2].map(|i| [r[(i, 0)], r[(i, 1)], r[(i, 2)]]),
+        translation: [c.t_cw.x, c.t_cw.y, c.t_cw.z],
+    }
+}
+
+/// The renderer's arm geometry: the scene's radii and the model's lengths (unless the scene
+/// overrides them).
+pub fn render_arm(scene: &Scene, lengths: [f64; 2]) -> actrack_render::ArmGeometry {
+    let a = &scene.arm;
+    actrack_render::ArmGeometry {
+        l1: a.upper_arm_length.unwrap_or(lengths[0]),
+        l2: a.lower_arm_length.unwrap_or(lengths[1]),
+        upper_radii: a.upper_arm_radii,
+        forearm_radii: a.forearm_radii,
+        forearm_fraction: a.forearm_fraction,
+        hand_half_axes: a.hand_half_axes,
+    }
+}
+
+/// Edge-image parameters for a frame width with SPEC's τ: SPEC §4.1 (σ_G = 4 px at 640 px,
+/// scaled). A scene's own are [`Scene::edge_params`].
+pub fn edge_params(width: u32) -> actrack_render::EdgeParams {
+    actrack_render::EdgeParams {
+        sigma: default_edge_sigma(width),
+        ..actrack_render::EdgeParams::default()
+    }
+}
+
+/// σ_G of SPEC §4.1 for an image `width` pixels wide: 4 px at 640, scaled with the width and
+/// clamped to [1, 8] px.
+pub fn default_edge_sigma(width: u32) -> f32 {
+    (4.0 * f64::from(width) / 640.0).clamp(1.0, 8.0) as f32
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -911,49 +956,4 @@ origin = [0.1, 0.0, 1.1]
         assert!((s.table_height() - want).abs() < 1e-12);
         assert!(s.table_height() < 0.0, "{}", s.table_height());
     }
-}
-
-/// Converts a scene camera to the renderer's.
-pub fn render_camera(c: &Camera) -> actrack_render::Camera {
-    let r = c.r_cw;
-    actrack_render::Camera {
-        width: c.width,
-        height: c.height,
-        fx: c.fx,
-        fy: c.fy,
-        cx: c.cx,
-        cy: c.cy,
-        distortion: c.distortion,
-        rotation: [0, 1, 2].map(|i| [r[(i, 0)], r[(i, 1)], r[(i, 2)]]),
-        translation: [c.t_cw.x, c.t_cw.y, c.t_cw.z],
-    }
-}
-
-/// The renderer's arm geometry: the scene's radii and the model's lengths (unless the scene
-/// overrides them).
-pub fn render_arm(scene: &Scene, lengths: [f64; 2]) -> actrack_render::ArmGeometry {
-    let a = &scene.arm;
-    actrack_render::ArmGeometry {
-        l1: a.upper_arm_length.unwrap_or(lengths[0]),
-        l2: a.lower_arm_length.unwrap_or(lengths[1]),
-        upper_radii: a.upper_arm_radii,
-        forearm_radii: a.forearm_radii,
-        forearm_fraction: a.forearm_fraction,
-        hand_half_axes: a.hand_half_axes,
-    }
-}
-
-/// Edge-image parameters for a frame width with SPEC's τ: SPEC §4.1 (σ_G = 4 px at 640 px,
-/// scaled). A scene's own are [`Scene::edge_params`].
-pub fn edge_params(width: u32) -> actrack_render::EdgeParams {
-    actrack_render::EdgeParams {
-        sigma: default_edge_sigma(width),
-        ..actrack_render::EdgeParams::default()
-    }
-}
-
-/// σ_G of SPEC §4.1 for an image `width` pixels wide: 4 px at 640, scaled with the width and
-/// clamped to [1, 8] px.
-pub fn default_edge_sigma(width: u32) -> f32 {
-    (4.0 * f64::from(width) / 640.0).clamp(1.0, 8.0) as f32
 }

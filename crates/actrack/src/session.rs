@@ -376,6 +376,7 @@ impl Session {
     /// One filter step on the current edge images with the configured observation model.
     fn filter(&mut self) -> (Estimate, [f64; 4]) {
         let pen = &self.config.observation.short_contour_penalty;
+        #[allow(clippy::single_match_else)] // the GPU variant exists with feature `gpu`
         match (&self.scorer, pen.enabled) {
             (Scorer::Cpu(likelihood), true) => {
                 let obs = ShortContourPenalty::new(
@@ -407,6 +408,7 @@ fn timed_step<O: ObservationModel>(
     obs: O,
     floor: Option<Floor>,
 ) -> (Estimate, [f64; 4]) {
+    #[allow(clippy::single_match_else)] // the two arms differ in type
     match floor {
         Some(f) => {
             let t = Timed::new(FingertipFloor::new(obs, f));

@@ -579,7 +579,7 @@ mod tests {
                     if n % 2 == 1 {
                         v[n / 2]
                     } else {
-                        (v[n / 2 - 1] + v[n / 2]) / 2.0
+                        f64::midpoint(v[n / 2 - 1], v[n / 2])
                     }
                 })
             })
@@ -593,8 +593,8 @@ mod tests {
         let mut x: u64 = 12345;
         let mut next = || {
             x = x
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
             ((x >> 33) % 1000) as f64 / 100.0 - 5.0
         };
         let poses: Vec<[f64; 9]> = (0..40).map(|_| std::array::from_fn(|_| next())).collect();
