@@ -11,7 +11,7 @@
 use std::time::Instant;
 
 use actrack_render::synth::SceneSynth;
-use actrack_render::{ArmGeometry as RenderArm, ImageRgb8, ImageView};
+use actrack_render::{ImageRgb8, ImageView};
 use nalgebra::{Rotation3, Vector3};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -20,7 +20,7 @@ use crate::config::TrackConfig;
 use crate::demo::train_generator_model;
 use crate::error::{Error, Result};
 use crate::motion::ACTIONS;
-use crate::scene::{Scene, default_scene, look_at, render_arm, render_camera};
+use crate::scene::{Scene, default_scene, look_at, render_camera};
 use crate::session::Session;
 use crate::synth::{MotionSource, random_targets, scene_synth, sequence};
 
@@ -202,8 +202,6 @@ pub struct Prepared {
     pub model: crate::model::ActionModel,
     /// Frames, `frames[t][v]`.
     pub frames: Vec<Vec<ImageRgb8>>,
-    /// Rendering geometry.
-    pub geometry: RenderArm,
 }
 
 /// Trains the models and renders `n_frames` frames of a synthetic sequence in every view.
@@ -211,7 +209,6 @@ pub fn prepare(opts: &BenchOptions, n_frames: usize) -> Result<Prepared> {
     let scene = bench_scene(opts.width, opts.height, opts.views)?;
     let (model, _) = train_generator_model(&scene, &ACTIONS, 2, opts.states.max(2), opts.seed)?;
     let lengths = [model.arm_lengths.upper_arm, model.arm_lengths.forearm_hand];
-    let geometry = render_arm(&scene, lengths);
     let mut poses = Vec::new();
     let mut round = 0u64;
     while poses.len() < n_frames.max(1) {
@@ -250,7 +247,6 @@ pub fn prepare(opts: &BenchOptions, n_frames: usize) -> Result<Prepared> {
         scene,
         model,
         frames,
-        geometry,
     })
 }
 

@@ -8,9 +8,10 @@ use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
-pub use actrack_pf::{CentredMedian, centred_median};
-pub use actrack_render::ContourMethod;
-use actrack_render::{ArmGeometry as RenderArm, Camera as RenderCamera, contour_points};
+pub use actrack_pf::centred_median;
+use actrack_render::{
+    ArmGeometry as RenderArm, Camera as RenderCamera, ContourMethod, contour_points,
+};
 use image::RgbImage;
 
 use crate::config::TrackConfig;
@@ -19,8 +20,7 @@ use crate::frames::{Frame, FrameSource};
 use crate::mcap_out::{EstimateMsg, FrameRecord, TrackWriter};
 use crate::model::ActionModel;
 use crate::scene::{Scene, render_camera};
-pub use crate::scene::{default_edge_sigma, edge_params, render_arm};
-pub use crate::session::{FrameResult, PoseReport, Session, training_theta_regions};
+use crate::session::{FrameResult, PoseReport, Session};
 use crate::track_csv::{TrajRow, Trajectory};
 
 /// Sets the number of worker threads of the global pool (once, before any tracking).
@@ -283,13 +283,13 @@ pub fn track(
         } else {
             Vec::new()
         };
-        let estimate = r.estimate.clone();
+        let (best, causal) = (r.estimate.best_pose, r.estimate.smoothed_pose);
         let t = Tracked {
             frame,
             r,
             particles,
         };
-        if let Some((mut t, pose)) = report.push(t, &estimate) {
+        if let Some((mut t, pose)) = report.push(t, best, causal) {
             t.r.smoothed_world = scene.pose_to_world(&pose);
             sink.write(&t)?;
             progress(sink.traj.rows.len(), total);

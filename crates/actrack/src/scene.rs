@@ -290,6 +290,29 @@ pub struct Camera {
 }
 
 impl Camera {
+    /// A distortion-free camera of `width`×`height` pixels with focal length `f` (pixels) in
+    /// both axes, its principal point at the image centre, and the world → camera pose
+    /// (`r_cw`, `t_cw`).
+    pub fn centred(
+        name: &str,
+        (width, height): (u32, u32),
+        f: f64,
+        (r_cw, t_cw): (Matrix3<f64>, Vector3<f64>),
+    ) -> Self {
+        Self {
+            name: name.into(),
+            width,
+            height,
+            fx: f,
+            fy: f,
+            cx: (f64::from(width) - 1.0) / 2.0,
+            cy: (f64::from(height) - 1.0) / 2.0,
+            distortion: [0.0; 5],
+            r_cw,
+            t_cw,
+        }
+    }
+
     /// Camera coordinates of a world point.
     pub fn to_camera(&self, x_w: &Vector3<f64>) -> Vector3<f64> {
         self.r_cw * x_w + self.t_cw
@@ -721,21 +744,10 @@ pub fn default_scene(width: u32, height: u32) -> Scene {
     // (where θ lives) is seen nearly face-on, which makes both components of θ observable.
     let eye = Vector3::new(0.2, 0.5, 2.4);
     let target = Vector3::new(0.0, 0.35, 0.8);
-    let (r_cw, t_cw) =
+    let pose =
         look_at(eye, target, Vector3::z()).unwrap_or((Matrix3::identity(), Vector3::zeros()));
     Scene {
-        cameras: vec![Camera {
-            name: "camera0".into(),
-            width,
-            height,
-            fx: f,
-            fy: f,
-            cx: (f64::from(width) - 1.0) / 2.0,
-            cy: (f64::from(height) - 1.0) / 2.0,
-            distortion: [0.0; 5],
-            r_cw,
-            t_cw,
-        }],
+        cameras: vec![Camera::centred("camera0", (width, height), f, pose)],
         table: TableRegion {
             placement: Placement {
                 origin: Vector3::new(0.0, 0.5, 0.75),

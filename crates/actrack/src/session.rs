@@ -451,14 +451,15 @@ impl<T> PoseReport<T> {
         })
     }
 
-    /// Feeds a tracked frame (its payload and estimate); returns the frame now complete, if
-    /// any, with its reported pose (actor frame).
-    pub fn push(&mut self, item: T, estimate: &Estimate) -> Option<(T, [f64; 9])> {
+    /// Feeds a tracked frame: its payload, its best particle's pose and the filter's causal
+    /// median ([`Estimate::best_pose`], [`Estimate::smoothed_pose`]); returns the frame now
+    /// complete, if any, with its reported pose (actor frame).
+    pub fn push(&mut self, item: T, best: [f64; 9], causal: [f64; 9]) -> Option<(T, [f64; 9])> {
         match self.centred.as_mut() {
-            None => Some((item, estimate.smoothed_pose)),
+            None => Some((item, causal)),
             Some(c) => {
                 self.waiting.push_back(item);
-                let pose = c.push(estimate.best_pose)?;
+                let pose = c.push(best)?;
                 self.waiting.pop_front().map(|t| (t, pose))
             }
         }
@@ -599,7 +600,8 @@ mod tests {
         let mut report = PoseReport::new(&c.output).unwrap();
         let mut out = Vec::new();
         for (i, r) in results.iter().enumerate() {
-            if let Some((j, pose)) = report.push(i, &r.estimate) {
+            if let Some((j, pose)) = report.push(i, r.estimate.best_pose, r.estimate.smoothed_pose)
+            {
                 assert_eq!(j + 2, i, "frames leave two frames later");
                 out.push((j, pose));
             }
@@ -614,7 +616,8 @@ mod tests {
         // Causal: each frame at once with the filter's own median.
         let causal = config(&["output.median=\"causal\"", "output.median_window=5"]);
         let mut report = PoseReport::new(&causal.output).unwrap();
-        let (i, pose) = report.push(7usize, &results[0].estimate).unwrap();
+        let e = &results[0].estimate;
+        let (i, pose) = report.push(7usize, e.best_pose, e.smoothed_pose).unwrap();
         assert_eq!((i, pose), (7, results[0].estimate.smoothed_pose));
         assert!(report.finish().is_empty());
     }

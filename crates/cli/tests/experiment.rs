@@ -80,7 +80,7 @@ fn experiment_and_track_write_the_same_csv() {
     assert!(res.in_view > 0.999);
 
     let dir = tempfile::tempdir().unwrap();
-    let run = export_trial(&model, &held_out[0], &cond, dir.path()).unwrap();
+    let run = export_trial(&model, &held_out, "ADL008FR1", &cond, dir.path()).unwrap();
     assert_eq!(
         run.track, runs[0].track,
         "export tracks as run_condition does"

@@ -34,7 +34,7 @@ use actrack::synth::scene_synth;
 use actrack::track_csv::{TrajRow, Trajectory};
 use actrack::train::{Progress, import_trials};
 use actrack::{Error, Result};
-use actrack_render::{ImageView, contour_points};
+use actrack_render::contour_points;
 use image::RgbImage;
 use nalgebra::Vector3;
 use rayon::prelude::*;
@@ -159,7 +159,7 @@ pub fn theta_region(model: &ActionModel) -> ([f64; 2], [f64; 2]) {
 
 fn camera(name: &str, eye: [f64; 3], target: [f64; 3]) -> Result<Camera> {
     let o = Vector3::from(SHOULDER);
-    let (r_cw, t_cw) = look_at(
+    let pose = look_at(
         Vector3::from(eye) + o,
         Vector3::from(target) + o,
         Vector3::z(),
@@ -167,18 +167,7 @@ fn camera(name: &str, eye: [f64; 3], target: [f64; 3]) -> Result<Camera> {
     .ok_or_else(|| Error::Config("camera: degenerate look-at".into()))?;
     let (w, h) = (640u32, 480u32);
     let f = f64::from(w) / 2.0 / (HFOV_DEG.to_radians() / 2.0).tan();
-    Ok(Camera {
-        name: name.into(),
-        width: w,
-        height: h,
-        fx: f,
-        fy: f,
-        cx: (f64::from(w) - 1.0) / 2.0,
-        cy: (f64::from(h) - 1.0) / 2.0,
-        distortion: [0.0; 5],
-        r_cw,
-        t_cw,
-    })
+    Ok(Camera::centred(name, (w, h), f, pose))
 }
 
 /// The scene of a subject: `views` cameras (1 or 2), the table around the model's θ region with
@@ -587,14 +576,7 @@ pub fn run_video(
                 );
             }
             render_ms.push(t0.elapsed().as_secs_f64() * 1e3);
-            let views = images
-                .iter()
-                .map(|img| {
-                    ImageView::rgb8(img.as_raw(), img.width(), img.height())
-                        .map_err(|e| Error::Config(format!("frame {frame}: {e}")))
-                })
-                .collect::<Result<Vec<_>>>()?;
-            let r = session.step(frame, &views)?;
+            let r = session.step_rgb(frame, &images.iter().collect::<Vec<_>>())?;
             step_ms.push(session.last_times().total);
             let row = track_row(frame, t, &names, &r);
             let mut b = row.clone();
@@ -603,7 +585,8 @@ pub fn run_video(
             let mut m = row.clone();
             m.pose = scene.pose_to_world(&r.estimate.mean_pose);
             mean.rows.push(m);
-            if let Some((mut row, pose)) = report.push(row, &r.estimate) {
+            let (best_pose, causal) = (r.estimate.best_pose, r.estimate.smoothed_pose);
+            if let Some((mut row, pose)) = report.push(row, best_pose, causal) {
                 row.pose = scene.pose_to_world(&pose);
                 track.rows.push(row);
             }
@@ -811,18 +794,24 @@ pub fn two_action_label(a: &str) -> String {
     }
 }
 
-/// Tracks `trial` under `cond` as [`run_condition`] does and writes what `actrack-cli track`
-/// needs to track it again into `dir`: `frames/` (PNG, lossless), `scene.toml`, `config.toml`
-/// and `model.actrack.json`, and the experiment's own track as `track.csv` (with the
-/// configuration in its header, as `track` writes it). Returns the run.
+/// Tracks the trial called `name` of `trials` under `cond` as [`run_condition`] does on
+/// `trials` (the subject's arm lengths and rest height from all its trials there) and writes
+/// what `actrack-cli track` needs to track it again into `dir`: `frames/` (PNG, lossless),
+/// `scene.toml`, `config.toml` and `model.actrack.json`, and the experiment's own track as
+/// `track.csv` (with the configuration in its header, as `track` writes it). Returns the run.
 pub fn export_trial(
     model: &ActionModel,
-    trial: &TestTrial,
+    trials: &[TestTrial],
+    name: &str,
     cond: &Condition,
     dir: &Path,
 ) -> Result<VideoRun> {
-    let lengths = subject_lengths(std::slice::from_ref(trial));
-    let rest = rest_heights(std::slice::from_ref(trial));
+    let trial = trials
+        .iter()
+        .find(|t| t.name == name)
+        .ok_or_else(|| Error::Config(format!("export: no trial {name}")))?;
+    let lengths = subject_lengths(trials);
+    let rest = rest_heights(trials);
     let (scene, config) =
         subject_setup(model, cond, &trial.subject, &lengths, &rest, trial.lengths)?;
     let run = run_video(

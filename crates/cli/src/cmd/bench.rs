@@ -5,7 +5,6 @@
 //! time per frame (median, p95), frames/s, the share of each stage and the peak memory, so users
 //! can check the real-time budget on their machine.
 
-use std::path::PathBuf;
 use std::process::ExitCode;
 
 use actrack::bench::{BenchOptions, BenchReport, run_bench};
@@ -36,18 +35,9 @@ pub enum DeviceArg {
 /// Options of `bench`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// A tracking configuration file (TOML; default: the `default` preset, what `track` runs).
-    #[arg(long, value_name = "FILE", conflicts_with = "preset")]
-    pub config: Option<PathBuf>,
-    /// A configuration shipped with actrack (`default`, `paper`).
-    #[arg(long, value_name = "NAME")]
-    pub preset: Option<String>,
-    /// Override one configuration key (repeatable), as `track --set`.
-    #[arg(long = "set", value_name = "KEY=VALUE")]
-    pub set: Vec<String>,
-    /// Particles (the key `filter.particles`).
-    #[arg(long)]
-    pub particles: Option<usize>,
+    /// The tracking configuration timed (default: what `track` runs).
+    #[command(flatten)]
+    pub config: super::config::ConfigArgs,
     /// Frame width in pixels.
     #[arg(long, default_value_t = 640)]
     pub width: u32,
@@ -134,7 +124,7 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
     if args.width < 16 || args.height < 16 {
         return Err(super::UsageError("--width and --height must be ≥ 16".into()).into());
     }
-    let mut set = args.set.clone();
+    let mut set = Vec::new();
     if let Some(c) = args.contour {
         set.push(format!(
             "observation.contour={}",
@@ -155,13 +145,7 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
         }
         set.push(format!("observation.device={name}"));
     }
-    let config = super::track::build_config(
-        args.config.as_deref(),
-        args.preset.as_deref(),
-        &set,
-        args.particles,
-        Some(args.seed),
-    )?;
+    let config = args.config.build(&set, Some(args.seed))?;
     let opts = BenchOptions {
         config,
         width: args.width,

@@ -23,7 +23,7 @@ pub struct Args {
 pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
     super::track::install_stop_handler();
     let start = std::time::Instant::now();
-    let config = super::track::build_config(None, None, &[], args.particles, Some(args.seed))?;
+    let config = super::config::build(None, None, &[], args.particles, Some(args.seed))?;
     let opts = DemoOptions {
         dir: args.dir.clone(),
         config,

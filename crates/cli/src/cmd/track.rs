@@ -4,7 +4,6 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use actrack::TrackConfig;
 use actrack::frames::{FrameOptions, FrameSource};
 use actrack::model::ActionModel;
 use actrack::pipeline::{TrackOutputs, track};
@@ -51,21 +50,9 @@ pub struct Args {
     /// Also put the camera image, calibration and contour topics in the MCAP.
     #[arg(long)]
     pub images: bool,
-    /// A tracking configuration file (TOML, `TrackConfig`: keys not given keep the defaults;
-    /// docs/configuration.md lists every key).
-    #[arg(long, value_name = "FILE", conflicts_with = "preset")]
-    pub config: Option<PathBuf>,
-    /// A configuration shipped with actrack: `default` (the most accurate measured; what
-    /// `track` runs without --config) or `paper` (the paper's method exactly, for comparison).
-    #[arg(long, value_name = "NAME")]
-    pub preset: Option<String>,
-    /// Override one configuration key, e.g. `--set filter.particles=800` or
-    /// `--set output.median=causal` (repeatable; applied after --config / --preset).
-    #[arg(long = "set", value_name = "KEY=VALUE")]
-    pub set: Vec<String>,
-    /// Number of particles (the key `filter.particles`).
-    #[arg(long)]
-    pub particles: Option<usize>,
+    /// The tracking configuration.
+    #[command(flatten)]
+    pub config: super::config::ConfigArgs,
     /// Seed of every random draw (the key `filter.seed`; the result does not depend on
     /// --threads).
     #[arg(long)]
@@ -81,34 +68,6 @@ pub struct Args {
     pub skip_bad_frames: bool,
 }
 
-/// The configuration of `--config` / `--preset`, then `--set`, `--particles` and `--seed`.
-pub fn build_config(
-    config: Option<&std::path::Path>,
-    preset: Option<&str>,
-    set: &[String],
-    particles: Option<usize>,
-    seed: Option<u64>,
-) -> anyhow::Result<TrackConfig> {
-    let usage = |e: actrack::Error| super::UsageError(e.to_string());
-    let mut cfg = match (config, preset) {
-        (Some(p), _) => TrackConfig::load(p).map_err(usage)?,
-        (None, Some(name)) => TrackConfig::preset(name).map_err(usage)?,
-        (None, None) => TrackConfig::default(),
-    };
-    let mut overrides: Vec<String> = set.to_vec();
-    if let Some(m) = particles {
-        overrides.push(format!("filter.particles={m}"));
-    }
-    if let Some(s) = seed {
-        overrides.push(format!("filter.seed={s}"));
-    }
-    for kv in &overrides {
-        cfg.set(kv)
-            .map_err(|e| super::UsageError(format!("--set {kv}: {e}")))?;
-    }
-    Ok(cfg)
-}
-
 /// Runs `track`.
 pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
     if args.output.is_none() && args.csv.is_none() && args.overlay.is_none() {
@@ -117,13 +76,7 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
         )
         .into());
     }
-    let config = build_config(
-        args.config.as_deref(),
-        args.preset.as_deref(),
-        &args.set,
-        args.particles,
-        args.seed,
-    )?;
+    let config = args.config.build(&[], args.seed)?;
     if let Some(n) = args.threads {
         actrack::pipeline::set_threads(n)?;
     }

@@ -258,11 +258,7 @@ fn main() -> Res<()> {
             ModelKind::Two => (&m2, &trials2),
             ModelKind::Three => (&m3, &trials3),
         };
-        let t = tr
-            .iter()
-            .find(|t| t.name == *name)
-            .ok_or_else(|| format!("--export: no trial {name}"))?;
-        export_trial(m, t, c, &a.export_dir)?;
+        export_trial(m, tr, name, c, &a.export_dir)?;
         eprintln!(
             "exported {name} under `{}` to {}",
             c.name,
