@@ -57,6 +57,11 @@ pub struct FilterConfig {
     /// resampling, whatever their posterior, so that a less probable action stays tracked and in
     /// phase; 0 resamples the joint set (SPEC §3.6 literally).
     pub action_floor: f64,
+    /// Probability per frame, in [0, 0.5), that the action label may change (a Markov chain
+    /// on the action, applied to the carried action posterior with `action_floor` > 0; not in
+    /// the paper): frames that carry little action information, such as the rest pose, cannot
+    /// drive a later-discriminated action's posterior to zero before its movement starts.
+    pub action_switch: f64,
     /// Cap on every model state's self-transition probability, in (0, 1] (not in the paper;
     /// 1 = the models' own dwell times): no state is expected to last longer than
     /// 1/(1 − max_stay) frames, so a subject who moves faster than the demonstrators is not
@@ -294,6 +299,7 @@ impl Default for FilterConfig {
             seed: 0,
             sigma_end_ratio: 1.0 / 16.0,
             action_floor: 0.9,
+            action_switch: 0.0,
             max_stay: 0.8,
             keep_last_dwell: true,
             speed_range: Vec::new(),
@@ -521,6 +527,12 @@ impl TrackConfig {
             return Err(bad(
                 "filter.action_floor",
                 format!("must be in [0, 1), got {}", f.action_floor),
+            ));
+        }
+        if !(f.action_switch.is_finite() && (0.0..0.5).contains(&f.action_switch)) {
+            return Err(bad(
+                "filter.action_switch",
+                format!("must be in [0, 0.5), got {}", f.action_switch),
             ));
         }
         in_range(

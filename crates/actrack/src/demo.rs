@@ -82,6 +82,8 @@ pub struct DemoReport {
     pub model: PathBuf,
     /// Scene file.
     pub scene: PathBuf,
+    /// The tracking configuration used (TOML).
+    pub config: PathBuf,
     /// Frame directory.
     pub frames: PathBuf,
     /// Ground truth CSV.
@@ -254,6 +256,8 @@ pub fn run_demo(
     let mut config = opts.config.clone();
     config.filter.seed = opts.seed;
     config.check()?;
+    let config_path = p("config.toml");
+    std::fs::write(&config_path, config.to_toml()).map_err(|e| Error::write(&config_path, e))?;
     say(&format!(
         "tracking with {} particles…",
         config.filter.particles
@@ -289,6 +293,7 @@ pub fn run_demo(
         seed: opts.seed,
         model: model_path,
         scene: scene_path,
+        config: config_path,
         frames: frames_dir,
         truth: truth_path,
         mcap,

@@ -148,7 +148,12 @@ fn tracker_config(model: &ActionModel, scene: &Scene, cfg: &TrackConfig) -> Resu
         .sigma_end_ratio(f.sigma_end_ratio)
         .speed_range(cfg.speed_range())
         .median_window(causal)
-        .action_balance(balance);
+        .action_balance(balance)
+        .action_switch(if f.action_floor > 0.0 {
+            f.action_switch
+        } else {
+            0.0
+        });
     if cfg.prior.theta == ThetaPrior::Training {
         b = b.action_regions(training_theta_regions(
             model,

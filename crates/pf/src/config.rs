@@ -155,6 +155,8 @@ pub struct TrackerConfig {
     pub(crate) speed_range: Option<[f64; 2]>,
     #[serde(default)]
     pub(crate) phase_jump: Option<f64>,
+    #[serde(default)]
+    pub(crate) action_switch: f64,
     pub(crate) median_window: usize,
     pub(crate) seed: u64,
 }
@@ -181,6 +183,7 @@ impl TrackerConfig {
                 action_regions: None,
                 speed_range: None,
                 phase_jump: None,
+                action_switch: 0.0,
                 median_window: 5,
                 seed: 0,
             },
@@ -256,6 +259,10 @@ impl TrackerConfig {
     /// The phase-jump rate ρ, if set.
     pub fn phase_jump(&self) -> Option<f64> {
         self.phase_jump
+    }
+    /// The per-frame action-switch probability ε of mixture resampling (0 = none).
+    pub fn action_switch(&self) -> f64 {
+        self.action_switch
     }
     /// Window of the causal median filter of the best pose, frames.
     pub fn median_window(&self) -> usize {
@@ -339,6 +346,20 @@ impl TrackerConfigBuilder {
     #[must_use]
     pub fn action_balance(mut self, balance: ActionBalance) -> Self {
         self.config.action_balance = balance;
+        self
+    }
+    /// Per-frame action-switch probability ε (not in the SPEC; default 0). With
+    /// [`ActionBalance::Mixture`], the carried action posterior becomes
+    /// `(1 − ε)·P(a) + ε/|𝒜_live|` at each resampling: a Markov chain on the action label that
+    /// lets the label change at any frame with probability ε. Without it, frames that carry
+    /// almost no action information (the rest pose, where every action's model differs only
+    /// slightly) multiply up until the posterior of the true action underflows, and the
+    /// movement that follows cannot bring it back; with it, no action's posterior falls below
+    /// about ε/|𝒜| times its likelihood ratio of one frame. No effect with
+    /// [`ActionBalance::Joint`].
+    #[must_use]
+    pub fn action_switch(mut self, epsilon: f64) -> Self {
+        self.config.action_switch = epsilon;
         self
     }
     /// How poses are generated (default one Gaussian draw).
@@ -455,6 +476,12 @@ impl TrackerConfigBuilder {
         {
             return bad(format!(
                 "the per-action particle floor is a fraction of M in (0, 1) (default 0.25), got {f}"
+            ));
+        }
+        if !(c.action_switch.is_finite() && (0.0..0.5).contains(&c.action_switch)) {
+            return bad(format!(
+                "the action-switch probability is per frame in [0, 0.5) (default 0), got {}",
+                c.action_switch
             ));
         }
         if let PoseSampling::Gaussian { samples } = c.pose_sampling

@@ -577,6 +577,17 @@ impl Tracker {
         mx.posterior.clear();
         mx.posterior
             .extend(mx.log_mass.iter().map(|&l| (l - lse).exp()));
+        let eps = self.config.action_switch;
+        if eps > 0.0 {
+            // Switching only among actions with particles of non-zero weight: an action
+            // without any has nothing to resample from.
+            let live = mx.log_mass.iter().filter(|l| l.is_finite()).count() as f64;
+            for (p, l) in mx.posterior.iter_mut().zip(&mx.log_mass) {
+                if l.is_finite() {
+                    *p = (1.0 - eps) * *p + eps / live;
+                }
+            }
+        }
         allocate_actions(&mx.posterior, self.config.particles, floor, &mut mx.counts);
         self.ancestors.clear();
         self.log_w_new.clear();
@@ -598,7 +609,12 @@ impl Tracker {
                 .resample_n(&mx.member_w, n_a, rng, &mut mx.draws);
             self.ancestors
                 .extend(mx.draws.iter().map(|&j| mx.members[j]));
-            let lw = mx.log_mass[a] - lse - (n_a as f64).ln();
+            let log_p = if eps > 0.0 {
+                mx.posterior[a].ln()
+            } else {
+                mx.log_mass[a] - lse
+            };
+            let lw = log_p - (n_a as f64).ln();
             self.log_w_new.extend(std::iter::repeat_n(lw, n_a));
         }
         debug_assert_eq!(self.ancestors.len(), self.config.particles);

@@ -11,9 +11,9 @@ pub struct Args {
     /// The folder for everything the demo makes.
     #[arg(long, default_value = "actrack-demo")]
     pub dir: PathBuf,
-    /// Particles (default: the `default` preset's, as `track` uses).
-    #[arg(long)]
-    pub particles: Option<usize>,
+    /// The tracking configuration (default: the `default` preset, as `track` uses).
+    #[command(flatten)]
+    pub config: super::config::ConfigArgs,
     /// Seed of everything.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -23,7 +23,7 @@ pub struct Args {
 pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
     super::track::install_stop_handler();
     let start = std::time::Instant::now();
-    let config = super::config::build(None, None, &[], args.particles, Some(args.seed))?;
+    let config = args.config.build(&[], Some(args.seed))?;
     let opts = DemoOptions {
         dir: args.dir.clone(),
         config,
@@ -79,15 +79,13 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
     );
     println!("reproduce the result by hand:");
     println!(
-        "  actrack-cli track --model {} --scene {} --input {} -o {} --csv {}{} --seed {}",
+        "  actrack-cli track --model {} --scene {} --input {} -o {} --csv {} --config {}",
         shown(&r.model),
         shown(&r.scene),
         shown(&r.frames),
         shown(&r.mcap),
         shown(&r.csv),
-        args.particles
-            .map_or_else(String::new, |m| format!(" --particles {m}")),
-        r.seed
+        shown(&r.config),
     );
     println!(
         "  actrack-cli eval --track {} --truth {} --plots {}",
