@@ -61,6 +61,8 @@ mod shape;
 use shape::{Gen32, Run32, Shape32, abs, abs64, inf, tolerance_bound};
 
 /// Window lengths (f32 values) of G for the loops without bounds checks.
+const W16: usize = 1 << 16;
+const W17: usize = 1 << 17;
 const W18: usize = 1 << 18;
 const W20: usize = 1 << 20;
 
@@ -257,12 +259,18 @@ impl pulp::NullaryFnOnce for Nearest<'_> {
                     }
                 }};
             }
-            if fits(W18) {
+            // The smallest window that holds the part's rows and fits in the image, so small
+            // images take the f32 loop too.
+            if fits(W16) {
+                go!(W16);
+            } else if fits(W17) {
+                go!(W17);
+            } else if fits(W18) {
                 go!(W18);
             } else if fits(W20) {
                 go!(W20);
             } else {
-                // Small images or parts taller than the windows: the f64 loop.
+                // Tiny images or parts taller than the windows: the f64 loop.
                 let (e2, k) = part_f64(s, &ctx, &acc);
                 acc.sum = e2;
                 acc.n += k;

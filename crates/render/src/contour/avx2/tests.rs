@@ -5,12 +5,19 @@ use super::*;
 use crate::{ArmGeometry, Camera, contour::project_prepared};
 
 /// Random poses around the arm's rest pose, seen by cameras from far to close (parts
-/// from a few pixels to a few hundred across), at 640×480 and 1920×1080.
+/// from a few pixels to a few hundred across), at 320×240, 480×360, 640×480, 1280×720 and
+/// 1920×1080 (each image size picks its own G window, or the f64 loop).
 fn scenes() -> Vec<(Camera, [f64; 9])> {
     let g = ArmGeometry::default();
     let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(11);
     let mut out = Vec::new();
-    for &(w, h) in &[(640u32, 480u32), (1920, 1080)] {
+    for &(w, h) in &[
+        (320u32, 240u32),
+        (480, 360),
+        (640, 480),
+        (1280, 720),
+        (1920, 1080),
+    ] {
         for &dist in &[0.6, 1.0, 1.8, 4.0] {
             let eye = Vector3::new(0.1, -dist, 1.3);
             let c =
