@@ -82,6 +82,18 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
     }
     let model = ActionModel::load(&args.model)?;
     let scene = Scene::load(&args.scene)?;
+    if scene.cameras.len() != 1 {
+        return Err(actrack::Error::invalid(
+            &args.scene,
+            format!(
+                "has {} [[camera]]s but track reads one video ({}): give a scene with only the \
+                 camera that filmed it",
+                scene.cameras.len(),
+                args.input.display()
+            ),
+        )
+        .into());
+    }
     let mut source = FrameSource::open(
         &args.input,
         &FrameOptions {

@@ -1,0 +1,297 @@
+//! Inputs that used to give a silently wrong result, lose work or abort, fed to the built
+//! binary exactly as a user would: each must now be a clear error (exit code 2, the file, key or
+//! frame named) or a warning with valid outputs.
+#![allow(clippy::unwrap_used)]
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::sync::OnceLock;
+
+const BIN: &str = env!("CARGO_BIN_EXE_actrack-cli");
+
+fn cli(dir: &Path, args: &[&str]) -> Output {
+    Command::new(BIN)
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .unwrap()
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// Exit code 2 and every needle in the message.
+fn expect_input_error(o: &Output, needles: &[&str]) {
+    let err = stderr(o);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    for n in needles {
+        assert!(err.contains(n), "`{n}` not in: {err}");
+    }
+}
+
+struct Fixture {
+    _dir: tempfile::TempDir,
+    root: PathBuf,
+}
+
+/// A generator model, the built-in scene at 160×120, a two-action video (frames, y4m, truth)
+/// and a joint-trajectory model trained on synthetic actor-frame trials.
+fn fixture() -> &'static Fixture {
+    static F: OnceLock<Fixture> = OnceLock::new();
+    F.get_or_init(|| {
+        let dir = tempfile::tempdir().unwrap();
+        let root = dir.path().to_path_buf();
+        let scene = actrack::scene::default_scene(160, 120);
+        std::fs::write(root.join("scene.toml"), scene.to_toml_string()).unwrap();
+        let (model, _) =
+            actrack::demo::train_generator_model(&scene, &["point", "push"], 2, 12, 3).unwrap();
+        model.save(&root.join("model.actrack.json")).unwrap();
+        let o = cli(
+            &root,
+            &[
+                "synth",
+                "--scene",
+                "scene.toml",
+                "-o",
+                "video",
+                "--action",
+                "point@-0.1,0.42",
+                "--action",
+                "push",
+                "--seed",
+                "5",
+                "--y4m",
+            ],
+        );
+        assert!(o.status.success(), "{}", stderr(&o));
+        write_trials(&root);
+        let o = cli(
+            &root,
+            &[
+                "train",
+                "--manifest",
+                "train.toml",
+                "-o",
+                "joints.actrack.json",
+            ],
+        );
+        assert!(o.status.success(), "{}", stderr(&o));
+        Fixture { _dir: dir, root }
+    })
+}
+
+/// A synthetic demonstration in the actor frame (metres): the fingertip leaves a rest point and
+/// goes to θ on the table (reach), or to θ, up to the mouth and back (drink).
+fn trial_csv(action: &str, theta: [f64; 2], len: usize, seed: f64, scale: f64) -> String {
+    let mut s = String::from("frame,time,action,theta_u,theta_v,px,py,pz,qx,qy,qz,rx,ry,rz\n");
+    let rest = [0.0, 0.3, -0.35];
+    for t in 0..len {
+        let u = t as f64 / (len - 1) as f64;
+        let smooth = |a: f64| a * a * (3.0 - 2.0 * a);
+        let r = if action == "reach" {
+            let k = smooth(u);
+            [
+                rest[0] + k * (theta[0] - rest[0]),
+                rest[1] + k * (theta[1] - rest[1]),
+                -0.35 + 0.08 * (std::f64::consts::PI * u).sin(),
+            ]
+        } else {
+            let (k, lift) = if u < 0.5 {
+                (smooth(2.0 * u), 0.0)
+            } else {
+                (
+                    1.0 - smooth(2.0 * u - 1.0),
+                    (std::f64::consts::PI * (2.0 * u - 1.0)).sin(),
+                )
+            };
+            [
+                rest[0] + k * (theta[0] - rest[0]),
+                rest[1] + k * (theta[1] - rest[1]) - 0.2 * lift,
+                -0.35 + 0.35 * lift,
+            ]
+        };
+        let wob = 0.002 * ((t as f64) * 1.7 + seed).sin();
+        let p = [wob, 0.0, 0.0];
+        let q = [0.5 * r[0] + 0.1, 0.5 * r[1] - 0.05, -0.28 + wob];
+        let _ = write!(
+            s,
+            "{t},{:.4},{action},{},{}",
+            t as f64 / 30.0,
+            theta[0],
+            theta[1]
+        );
+        for v in [p, q, r] {
+            let _ = write!(
+                s,
+                ",{:.5},{:.5},{:.5}",
+                scale * v[0],
+                scale * (v[1] + wob),
+                scale * v[2]
+            );
+        }
+        s.push('\n');
+    }
+    s
+}
+
+fn write_trials(dir: &Path) {
+    std::fs::create_dir_all(dir.join("data")).unwrap();
+    let mut k = 0;
+    for action in ["reach", "drink"] {
+        for (i, x) in [-0.2, -0.1, 0.0, 0.1].iter().enumerate() {
+            for (j, y) in [0.5, 0.6, 0.7].iter().enumerate() {
+                let name = format!("data/{action}_{i}{j}.csv");
+                let len = 40 + 3 * i + 2 * j;
+                std::fs::write(
+                    dir.join(name),
+                    trial_csv(action, [*x, *y], len, f64::from(k), 1.0),
+                )
+                .unwrap();
+                k += 1;
+            }
+        }
+    }
+    let manifest = "[options]\nstates = 6\niterations = 20\ncov_floor = 0.003\n\n\
+        [preprocessing]\ntrim = false\nframe_rate = \"capture\"\n\n\
+        [[trials]]\nfiles = \"data/reach_*.csv\"\naction = \"reach\"\n\n\
+        [[trials]]\nfiles = \"data/drink_*.csv\"\naction = \"drink\"\n";
+    std::fs::write(dir.join("train.toml"), manifest).unwrap();
+}
+
+fn track(root: &Path, args: &[&str]) -> Output {
+    let mut all = vec![
+        "track",
+        "--model",
+        "model.actrack.json",
+        "--particles",
+        "40",
+        "--seed",
+        "2",
+    ];
+    all.extend_from_slice(args);
+    cli(root, &all)
+}
+
+// ---- 1. Silently wrong results --------------------------------------------------------------
+
+#[test]
+fn two_cameras_and_one_video_is_refused_naming_the_scene() {
+    let f = fixture();
+    let scene = std::fs::read_to_string(f.root.join("scene.toml")).unwrap();
+    let cut = scene.find("[table]").unwrap();
+    let second = scene[..cut].replace("camera0", "camera1");
+    std::fs::write(f.root.join("two_cameras.toml"), format!("{second}{scene}")).unwrap();
+    let o = track(
+        &f.root,
+        &[
+            "--scene",
+            "two_cameras.toml",
+            "--input",
+            "video/video.y4m",
+            "--csv",
+            "two.csv",
+        ],
+    );
+    expect_input_error(&o, &["two_cameras.toml", "2 [[camera]]s", "one video"]);
+    assert!(!f.root.join("two.csv").exists());
+}
+
+#[test]
+fn classify_refuses_a_world_frame_truth_csv() {
+    let f = fixture();
+    // The ground truth `synth` writes: DESIGN's columns, poses in the world frame.
+    let o = cli(
+        &f.root,
+        &[
+            "classify",
+            "--model",
+            "joints.actrack.json",
+            "--trial",
+            "video/truth.csv",
+        ],
+    );
+    expect_input_error(&o, &["video/truth.csv", "actor frame", "world-frame"]);
+}
+
+#[test]
+fn classify_refuses_millimetres() {
+    let f = fixture();
+    std::fs::write(
+        f.root.join("reach_mm.csv"),
+        trial_csv("reach", [0.0, 0.6], 45, 0.5, 1000.0),
+    )
+    .unwrap();
+    let o = cli(
+        &f.root,
+        &[
+            "classify",
+            "--model",
+            "joints.actrack.json",
+            "--trial",
+            "reach_mm.csv",
+        ],
+    );
+    expect_input_error(&o, &["reach_mm.csv", "millimetres"]);
+}
+
+/// θ of a movement seen only in part stays within the model's θ support (its training θ box
+/// plus [`actrack::train::THETA_SUPPORT_MARGIN`]) and comes with an uncertainty, however far
+/// the movement heads.
+#[test]
+fn partial_theta_stays_within_the_support_with_its_uncertainty() {
+    let f = fixture();
+    let model = actrack::ActionModel::load(&f.root.join("joints.actrack.json")).unwrap();
+    for (name, theta) in [("far", [0.9, 1.4]), ("near", [-0.15, 0.55])] {
+        let file = format!("reach_{name}.csv");
+        std::fs::write(f.root.join(&file), trial_csv("reach", theta, 45, 0.3, 1.0)).unwrap();
+        for fraction in ["0.5", "0.75"] {
+            let o = cli(
+                &f.root,
+                &[
+                    "classify",
+                    "--model",
+                    "joints.actrack.json",
+                    "--trial",
+                    &file,
+                    "--fraction",
+                    fraction,
+                    "--json",
+                ],
+            );
+            assert!(o.status.success(), "{}", stderr(&o));
+            let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+            let t = &v["trials"][0];
+            for s in t["scores"].as_array().unwrap() {
+                let a = model
+                    .actions
+                    .iter()
+                    .find(|a| a.name == s["action"].as_str().unwrap())
+                    .unwrap();
+                let (lo, hi) = actrack::train::theta_support(a);
+                for k in 0..2 {
+                    let th = s["theta"][k].as_f64().unwrap();
+                    assert!(
+                        th >= lo[k] - 1e-9 && th <= hi[k] + 1e-9,
+                        "{name} at {fraction}: {} θ[{k}] = {th} outside [{}, {}]",
+                        a.name,
+                        lo[k],
+                        hi[k]
+                    );
+                    let sd = s["theta_std"][k].as_f64().unwrap();
+                    assert!(sd.is_finite() && sd > 0.0, "{name}: σ {sd}");
+                }
+            }
+            if name == "far" {
+                assert_eq!(t["theta_at_bound"], true, "{t}");
+            } else {
+                let th = t["theta"].as_array().unwrap();
+                let err =
+                    (th[0].as_f64().unwrap() - theta[0]).hypot(th[1].as_f64().unwrap() - theta[1]);
+                assert!(err < 0.1, "near at {fraction}: θ {th:?} off by {err}");
+            }
+        }
+    }
+}
