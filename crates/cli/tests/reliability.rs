@@ -295,3 +295,157 @@ fn partial_theta_stays_within_the_support_with_its_uncertainty() {
         }
     }
 }
+
+// ---- 2. Plausibility --------------------------------------------------------------------------
+
+/// The fixture's scene with one key changed, written to `name`.
+fn scene_with(root: &Path, name: &str, edit: impl FnOnce(&mut toml::Table)) {
+    let text = std::fs::read_to_string(root.join("scene.toml")).unwrap();
+    let mut t: toml::Table = toml::from_str(&text).unwrap();
+    edit(&mut t);
+    std::fs::write(root.join(name), toml::to_string(&t).unwrap()).unwrap();
+}
+
+/// World → camera rotation (rows) and translation of a camera at `eye` looking at `target`
+/// (z up), for scenes written by the tests.
+fn look_at(eye: [f64; 3], target: [f64; 3]) -> (Vec<Vec<f64>>, Vec<f64>) {
+    let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    let cross = |a: [f64; 3], b: [f64; 3]| {
+        [
+            a[1] * b[2] - a[2] * b[1],
+            a[2] * b[0] - a[0] * b[2],
+            a[0] * b[1] - a[1] * b[0],
+        ]
+    };
+    let norm = |a: [f64; 3]| {
+        let n = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
+        [a[0] / n, a[1] / n, a[2] / n]
+    };
+    let z = norm(sub(target, eye));
+    let x = norm(cross(z, [0.0, 0.0, 1.0]));
+    let y = cross(z, x);
+    let r = vec![x.to_vec(), y.to_vec(), z.to_vec()];
+    let t = (0..3)
+        .map(|i| -(r[i][0] * eye[0] + r[i][1] * eye[1] + r[i][2] * eye[2]))
+        .collect();
+    (r, t)
+}
+
+fn set_camera(t: &mut toml::Table, eye: [f64; 3]) {
+    let (r, tr) = look_at(eye, [0.0, 0.5, 0.75]);
+    let cam = t["camera"].as_array_mut().unwrap()[0]
+        .as_table_mut()
+        .unwrap();
+    cam.insert("rotation".into(), toml::Value::try_from(r).unwrap());
+    cam.insert("translation".into(), toml::Value::try_from(tr).unwrap());
+}
+
+#[test]
+fn implausible_scenes_are_refused_naming_the_key() {
+    let f = fixture();
+    type Edit = Box<dyn FnOnce(&mut toml::Table)>;
+    let cases: Vec<(&str, Edit, &[&str])> = vec![
+        (
+            "far_camera.toml",
+            Box::new(|t| set_camera(t, [0.0, 1300.5, 300.75])),
+            &["camera[0]", "from the table centre"],
+        ),
+        (
+            "grazing_camera.toml",
+            Box::new(|t| set_camera(t, [0.0, 2.5, 0.80])),
+            &["camera[0]", "above the table plane"],
+        ),
+        (
+            "under_camera.toml",
+            Box::new(|t| set_camera(t, [0.0, 2.5, 0.70])),
+            &["camera[0]"],
+        ),
+        (
+            "far_actor.toml",
+            Box::new(|t| {
+                t["actor"].as_table_mut().unwrap().insert(
+                    "origin".into(),
+                    toml::Value::try_from([0.05, -9.9, 1.1]).unwrap(),
+                );
+            }),
+            &["actor.origin", "from the nearest point of the table"],
+        ),
+        (
+            "giant_arm.toml",
+            Box::new(|t| {
+                t["arm"]
+                    .as_table_mut()
+                    .unwrap()
+                    .insert("upper_arm_length".into(), toml::Value::Float(1e6));
+            }),
+            &["arm.upper_arm_length", "human arm"],
+        ),
+    ];
+    for (name, edit, needles) in cases {
+        scene_with(&f.root, name, edit);
+        let o = track(
+            &f.root,
+            &[
+                "--scene",
+                name,
+                "--input",
+                "video/video.y4m",
+                "--csv",
+                "x.csv",
+            ],
+        );
+        let mut n = vec![name];
+        n.extend_from_slice(needles);
+        expect_input_error(&o, &n);
+    }
+}
+
+/// The fixture's generator model with its JSON edited, written to `name`.
+fn model_with(root: &Path, name: &str, edit: impl FnOnce(&mut serde_json::Value)) {
+    let text = std::fs::read_to_string(root.join("model.actrack.json")).unwrap();
+    let mut v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    edit(&mut v);
+    std::fs::write(root.join(name), serde_json::to_string(&v).unwrap()).unwrap();
+}
+
+#[test]
+fn implausible_models_are_refused() {
+    let f = fixture();
+    model_with(&f.root, "dup.actrack.json", |v| {
+        v["actions"][1]["name"] = v["actions"][0]["name"].clone();
+    });
+    let o = cli(&f.root, &["inspect", "dup.actrack.json"]);
+    expect_input_error(&o, &["dup.actrack.json", "appears twice"]);
+    model_with(&f.root, "swapped.actrack.json", |v| {
+        let a = &mut v["actions"][0];
+        let (lo, hi) = (a["theta_min"].clone(), a["theta_max"].clone());
+        a["theta_min"] = hi;
+        a["theta_max"] = lo;
+    });
+    let o = cli(&f.root, &["inspect", "swapped.actrack.json"]);
+    expect_input_error(&o, &["swapped.actrack.json", "theta_min"]);
+}
+
+#[test]
+fn synth_refuses_theta_off_the_table_and_huge_frames() {
+    let f = fixture();
+    let o = cli(&f.root, &["synth", "-o", "off", "--action", "point@50,0.4"]);
+    expect_input_error(
+        &o,
+        &["--action point@50,0.4", "outside the scene's table region"],
+    );
+    assert!(!f.root.join("off").exists());
+    let o = cli(
+        &f.root,
+        &[
+            "synth",
+            "-o",
+            "huge",
+            "--action",
+            "point",
+            "--size",
+            "100000x100000",
+        ],
+    );
+    expect_input_error(&o, &["--size 100000x100000", "megapixels"]);
+}
