@@ -125,6 +125,19 @@ impl FrameSource {
         &self.skipped
     }
 
+    /// The input's path (`-` for stdin).
+    pub fn name(&self) -> &Path {
+        &self.name
+    }
+
+    /// The input directory of an image-directory source.
+    pub fn directory(&self) -> Option<&Path> {
+        match self.inner {
+            Inner::Dir { .. } => Some(&self.name),
+            Inner::Y4m(..) => None,
+        }
+    }
+
     /// The next frame, `None` at the end.
     pub fn next_frame(&mut self) -> Result<Option<Frame>> {
         loop {
@@ -153,6 +166,12 @@ impl FrameSource {
                         Ok(None) => {
                             if let Some(c) = child.as_mut() {
                                 finish_ffmpeg(c, &self.name, index)?;
+                            }
+                            if index == 0 {
+                                return Err(Error::invalid(
+                                    &self.name,
+                                    "no frames: the y4m stream ends after its header",
+                                ));
                             }
                             return Ok(None);
                         }

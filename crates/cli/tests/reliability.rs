@@ -449,3 +449,130 @@ fn synth_refuses_theta_off_the_table_and_huge_frames() {
     );
     expect_input_error(&o, &["--size 100000x100000", "megapixels"]);
 }
+
+// ---- 3. I/O and no lost work ------------------------------------------------------------------
+
+/// Data rows of a track CSV (comment lines and the header skipped).
+fn csv_rows(p: &Path) -> usize {
+    std::fs::read_to_string(p)
+        .unwrap()
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .count()
+        - 1
+}
+
+fn leftovers(dir: &Path) -> Vec<String> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .filter_map(|e| {
+            let n = e.unwrap().file_name().to_string_lossy().into_owned();
+            n.contains(".tmp-").then_some(n)
+        })
+        .collect()
+}
+
+/// The fixture's y4m cut after its header and `frames` whole frames plus `extra` bytes.
+fn cut_y4m(root: &Path, name: &str, frames: usize, extra: usize) {
+    let data = std::fs::read(root.join("video/video.y4m")).unwrap();
+    let header = data.iter().position(|&b| b == b'\n').unwrap() + 1;
+    // The second FRAME marker: the length of one frame record.
+    let frame = data[header + 6..]
+        .windows(6)
+        .position(|w| w == b"FRAME\n")
+        .unwrap()
+        + 6;
+    assert_eq!((data.len() - header) % frame, 0);
+    std::fs::write(root.join(name), &data[..header + frames * frame + extra]).unwrap();
+}
+
+#[test]
+fn y4m_cut_mid_frame_keeps_the_frames_before() {
+    let f = fixture();
+    let dir = tempfile::tempdir_in(&f.root).unwrap();
+    let d = dir.path();
+    for p in ["scene.toml", "model.actrack.json"] {
+        std::fs::copy(f.root.join(p), d.join(p)).unwrap();
+    }
+    std::fs::create_dir_all(d.join("video")).unwrap();
+    std::fs::copy(f.root.join("video/video.y4m"), d.join("video/video.y4m")).unwrap();
+    cut_y4m(d, "cut.y4m", 12, 1000);
+    let o = track(
+        d,
+        &[
+            "--scene",
+            "scene.toml",
+            "--input",
+            "cut.y4m",
+            "-o",
+            "cut.mcap",
+            "--csv",
+            "cut.csv",
+        ],
+    );
+    expect_input_error(&o, &["cut.y4m", "frame 12", "stopped after 12 frames"]);
+    assert_eq!(csv_rows(&d.join("cut.csv")), 12);
+    assert!(std::fs::metadata(d.join("cut.mcap")).unwrap().len() > 0);
+    let o = track(
+        d,
+        &[
+            "--scene",
+            "scene.toml",
+            "--input",
+            "cut.y4m",
+            "--csv",
+            "skip.csv",
+            "--skip-bad-frames",
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("broke off after 12 frames"),
+        "{}",
+        stderr(&o)
+    );
+    assert_eq!(csv_rows(&d.join("skip.csv")), 12);
+    assert!(leftovers(d).is_empty(), "{:?}", leftovers(d));
+
+    // A header and no frame is an error like an empty directory, and leaves no temporary file.
+    cut_y4m(d, "header.y4m", 0, 0);
+    let o = track(
+        d,
+        &[
+            "--scene",
+            "scene.toml",
+            "--input",
+            "header.y4m",
+            "-o",
+            "h.mcap",
+        ],
+    );
+    expect_input_error(&o, &["header.y4m", "no frames"]);
+    assert!(!d.join("h.mcap").exists());
+    assert!(leftovers(d).is_empty(), "{:?}", leftovers(d));
+}
+
+#[test]
+fn output_paths_are_checked_before_tracking() {
+    let f = fixture();
+    let base = ["--scene", "scene.toml", "--input", "video/frames"];
+    let run = |extra: &[&str]| {
+        let mut a = base.to_vec();
+        a.extend_from_slice(extra);
+        let t = std::time::Instant::now();
+        let o = track(&f.root, &a);
+        (o, t.elapsed())
+    };
+    let (o, took) = run(&["--csv", "missing/dir/t.csv"]);
+    expect_input_error(&o, &["missing/dir/t.csv", "does not exist"]);
+    assert!(!stderr(&o).contains(".tmp-"), "{}", stderr(&o));
+    // Refused before the video is tracked (the whole video takes far longer).
+    assert!(took.as_secs_f64() < 20.0, "{took:?}");
+    let (o, _) = run(&["-o", "same.out", "--csv", "same.out"]);
+    expect_input_error(&o, &["same.out", "same file"]);
+    assert!(!f.root.join("same.out").exists());
+    let (o, _) = run(&["--overlay", "video/frames/overlays"]);
+    expect_input_error(&o, &["video/frames/overlays", "inside the input directory"]);
+    assert!(!f.root.join("video/frames/overlays").exists());
+    assert!(leftovers(&f.root).is_empty());
+}

@@ -146,6 +146,21 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
             eprintln!("{what}: {}", p.display());
         }
     }
+    if let Some(why) = &summary.stopped {
+        eprintln!(
+            "warning: the input broke off after {} frames: {why}; the outputs hold the {} frames \
+             tracked before",
+            summary.frames, summary.frames
+        );
+        if !args.skip_bad_frames {
+            return Err(super::UsageError(format!(
+                "{}: stopped after {} frames (outputs finished with them): {why}",
+                args.input.display(),
+                summary.frames
+            ))
+            .into());
+        }
+    }
     if summary.interrupted {
         eprintln!(
             "interrupted after {} frames: the outputs hold the frames done so far",
