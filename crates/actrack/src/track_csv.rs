@@ -195,6 +195,18 @@ impl Trajectory {
             let mut pose = [0.0; 9];
             for j in 0..9 {
                 pose[j] = num(base[5 + j])?;
+                if !pose[j].is_finite() {
+                    return Err(Error::parse(
+                        path,
+                        ln + 1,
+                        format!(
+                            "column `{}`: `{}` is not a finite coordinate (every pose column \
+                             needs a number)",
+                            cols[base[5 + j]],
+                            f[base[5 + j]]
+                        ),
+                    ));
+                }
             }
             let posterior = post
                 .iter()

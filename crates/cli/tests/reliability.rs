@@ -576,3 +576,53 @@ fn output_paths_are_checked_before_tracking() {
     assert!(!f.root.join("video/frames/overlays").exists());
     assert!(leftovers(&f.root).is_empty());
 }
+
+// ---- 4. Resource limits and bad numbers -------------------------------------------------------
+
+#[test]
+fn eval_refuses_a_track_with_nan_naming_line_and_column() {
+    let f = fixture();
+    let dir = tempfile::tempdir_in(&f.root).unwrap();
+    let d = dir.path();
+    let o = track(
+        &f.root,
+        &[
+            "--scene",
+            "scene.toml",
+            "--input",
+            "video/video.y4m",
+            "--csv",
+            d.join("t.csv").to_str().unwrap(),
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = std::fs::read_to_string(d.join("t.csv")).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    let header = lines.iter().position(|l| !l.starts_with('#')).unwrap();
+    let rx = lines[header].split(',').position(|c| c == "rx").unwrap();
+    let bad_line = header + 4;
+    let mut out = String::new();
+    for (i, l) in lines.iter().enumerate() {
+        if i == bad_line {
+            let mut f: Vec<&str> = l.split(',').collect();
+            f[rx] = "NaN";
+            out.push_str(&f.join(","));
+        } else {
+            out.push_str(l);
+        }
+        out.push('\n');
+    }
+    std::fs::write(d.join("nan.csv"), out).unwrap();
+    let o = cli(
+        d,
+        &[
+            "eval",
+            "--track",
+            "nan.csv",
+            "--truth",
+            f.root.join("video/truth.csv").to_str().unwrap(),
+        ],
+    );
+    expect_input_error(&o, &[&format!("nan.csv:{}", bad_line + 1), "column `rx`"]);
+    assert!(!String::from_utf8_lossy(&o.stdout).contains("NaN"));
+}
