@@ -52,6 +52,10 @@ pub struct FrameSource {
     skipped: Vec<(usize, String)>,
 }
 
+/// The most pixels a y4m frame may have (8K UHD): larger headers are refused before a frame
+/// buffer is allocated.
+pub const MAX_FRAME_PIXELS: usize = 7680 * 4320;
+
 /// How to install ffmpeg, for messages.
 pub const FFMPEG_HINT: &str = "ffmpeg is not installed (or not on PATH); install it \
 (Debian/Ubuntu: `sudo apt-get install ffmpeg`, Fedora: `sudo dnf install ffmpeg`, macOS: \
@@ -125,6 +129,19 @@ impl FrameSource {
         &self.skipped
     }
 
+    /// The input's path (`-` for stdin).
+    pub fn name(&self) -> &Path {
+        &self.name
+    }
+
+    /// The input directory of an image-directory source.
+    pub fn directory(&self) -> Option<&Path> {
+        match self.inner {
+            Inner::Dir { .. } => Some(&self.name),
+            Inner::Y4m(..) => None,
+        }
+    }
+
     /// The next frame, `None` at the end.
     pub fn next_frame(&mut self) -> Result<Option<Frame>> {
         loop {
@@ -153,6 +170,12 @@ impl FrameSource {
                         Ok(None) => {
                             if let Some(c) = child.as_mut() {
                                 finish_ffmpeg(c, &self.name, index)?;
+                            }
+                            if index == 0 {
+                                return Err(Error::invalid(
+                                    &self.name,
+                                    "no frames: the y4m stream ends after its header",
+                                ));
                             }
                             return Ok(None);
                         }
@@ -412,6 +435,15 @@ impl Y4mReader {
             return Err(Error::invalid(
                 name,
                 "y4m header without a valid width (W) and height (H)",
+            ));
+        }
+        if w.saturating_mul(h) > MAX_FRAME_PIXELS {
+            return Err(Error::invalid(
+                name,
+                format!(
+                    "y4m header announces {w}×{h} frames, more than the {MAX_FRAME_PIXELS} \
+                     pixels (8K UHD) a frame may have"
+                ),
             ));
         }
         Ok(Self {

@@ -114,6 +114,8 @@ pub struct TrackWriter {
     seq: u32,
     images: bool,
     frames: usize,
+    /// Declared after `w`: the writer is closed before the unfinished file is removed.
+    guard: crate::track_csv::TempGuard,
 }
 
 fn mcap_err(path: &Path, e: &mcap::McapError) -> Error {
@@ -204,7 +206,8 @@ impl TrackWriter {
     /// camera topics.
     pub fn create(path: &Path, scene: &Scene, images: bool) -> Result<Self> {
         let tmp = temp_path(path);
-        let file = File::create(&tmp).map_err(|e| Error::write(&tmp, e))?;
+        let file = File::create(&tmp).map_err(|e| Error::write(path, e))?;
+        let guard = crate::track_csv::TempGuard::new(&tmp);
         let opts = mcap::WriteOptions::new()
             .compression(Some(mcap::Compression::Zstd))
             .profile("")
@@ -279,6 +282,7 @@ impl TrackWriter {
             seq: 0,
             images,
             frames: 0,
+            guard,
         })
     }
 
@@ -409,7 +413,9 @@ impl TrackWriter {
     pub fn finish(mut self) -> Result<()> {
         self.w.finish().map_err(|e| mcap_err(&self.tmp, &e))?;
         drop(self.w);
-        std::fs::rename(&self.tmp, &self.path).map_err(|e| Error::write(&self.path, e))
+        std::fs::rename(&self.tmp, &self.path).map_err(|e| Error::write(&self.path, e))?;
+        self.guard.keep();
+        Ok(())
     }
 }
 

@@ -279,6 +279,32 @@ impl ActionModel {
                     ),
                 ));
             }
+            let ordered = (0..2).all(|k| {
+                a.theta_min[k].is_finite()
+                    && a.theta_max[k].is_finite()
+                    && a.theta_min[k] <= a.theta_max[k]
+            });
+            if !ordered {
+                return Err(Error::invalid(
+                    path,
+                    format!(
+                        "action `{}`: theta_min {:?} and theta_max {:?} must be finite with \
+                         theta_min ≤ theta_max in both components",
+                        a.name, a.theta_min, a.theta_max
+                    ),
+                ));
+            }
+        }
+        for (i, a) in model.actions.iter().enumerate() {
+            if model.actions[..i].iter().any(|b| b.name == a.name) {
+                return Err(Error::invalid(
+                    path,
+                    format!(
+                        "action name `{}` appears twice: action names must be unique",
+                        a.name
+                    ),
+                ));
+            }
         }
         Ok(model)
     }

@@ -4,7 +4,7 @@
 //! `track` reads one video, filmed by the scene's only camera; several synchronised views go
 //! through [`Session::step`] with one image per camera.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
@@ -61,6 +61,9 @@ pub struct TrackSummary {
     pub interrupted: bool,
     /// Frames skipped as bad (index, reason).
     pub skipped: Vec<(usize, String)>,
+    /// The input broke off (a truncated stream, a failing decoder): why and where. The outputs
+    /// are finished and hold every frame tracked before.
+    pub stopped: Option<String>,
     /// The trajectory (tracker-output rows).
     pub trajectory: Trajectory,
 }
@@ -211,6 +214,87 @@ impl Sink<'_> {
     }
 }
 
+impl TrackOutputs {
+    /// Checks the output paths before any work: their directories exist, no two outputs are
+    /// the same file, none is the input, and overlays are not written into the input
+    /// directory (they would be read back as frames).
+    pub fn check(&self, input: &Path) -> Result<()> {
+        let files = [("-o", &self.mcap), ("--csv", &self.csv)];
+        for (flag, p) in files {
+            let Some(p) = p else { continue };
+            let dir = p.parent().filter(|d| !d.as_os_str().is_empty());
+            if let Some(d) = dir
+                && !d.is_dir()
+            {
+                return Err(Error::invalid(
+                    p,
+                    format!("{flag}: the directory {} does not exist", d.display()),
+                ));
+            }
+            if p.is_dir() {
+                return Err(Error::invalid(p, format!("{flag}: is a directory")));
+            }
+            if same_file(p, input) {
+                return Err(Error::invalid(
+                    p,
+                    format!("{flag}: is the input; it would be overwritten"),
+                ));
+            }
+        }
+        if let (Some(a), Some(b)) = (&self.mcap, &self.csv)
+            && same_file(a, b)
+        {
+            return Err(Error::invalid(
+                a,
+                "-o and --csv name the same file: the CSV would overwrite the MCAP",
+            ));
+        }
+        if let Some(o) = &self.overlay
+            && input.is_dir()
+        {
+            let (oc, ic) = (absolute(o), absolute(input));
+            if oc.starts_with(&ic) {
+                return Err(Error::invalid(
+                    o,
+                    format!(
+                        "--overlay: inside the input directory {}; the overlays would be read \
+                         back as frames",
+                        input.display()
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// `p` made absolute and canonical as far as it exists (the rest appended as written).
+fn absolute(p: &Path) -> PathBuf {
+    let p = std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());
+    let mut existing = p.as_path();
+    let mut rest = Vec::new();
+    loop {
+        if let Ok(c) = existing.canonicalize() {
+            let mut out = c;
+            for r in rest.iter().rev() {
+                out.push(r);
+            }
+            return out;
+        }
+        match (existing.parent(), existing.file_name()) {
+            (Some(parent), Some(name)) => {
+                rest.push(name.to_os_string());
+                existing = parent;
+            }
+            _ => return p,
+        }
+    }
+}
+
+fn same_file(a: &Path, b: &Path) -> bool {
+    absolute(a) == absolute(b)
+}
+
 /// Tracks every frame of `source` with `config`, writing the requested outputs (each carries
 /// the configuration). `stop` is polled between frames: when set, the outputs are finished with
 /// the frames done so far. `progress` is called after each frame written with (frames written,
@@ -232,6 +316,7 @@ pub fn track(
             scene.cameras.len()
         )));
     }
+    outputs.check(source.name())?;
     let mut session = Session::new(model, scene, config)?;
     let names = session.action_names().to_vec();
     if let Some(d) = &outputs.overlay {
@@ -263,16 +348,26 @@ pub fn track(
     let start = Instant::now();
     let mut filter_seconds = 0.0;
     let mut interrupted = false;
+    let mut stopped = None;
+    let mut tracked = 0usize;
     let mut cloud = Vec::new();
     loop {
         if stop.load(Ordering::Relaxed) {
             interrupted = true;
             break;
         }
-        let Some(frame) = source.next_frame()? else {
-            break;
+        let frame = match source.next_frame() {
+            Ok(Some(f)) => f,
+            Ok(None) => break,
+            // Keep the work done: finish the outputs with the frames tracked so far.
+            Err(e) if tracked > 0 => {
+                stopped = Some(e.to_string());
+                break;
+            }
+            Err(e) => return Err(e),
         };
         let r = session.step_rgb(frame.index, &[&frame.image])?;
+        tracked += 1;
         filter_seconds += session.last_times().total * 1e-3;
         let particles = if sink.writer.is_some() {
             session.tracker().cloud_into(&mut cloud);
@@ -313,6 +408,7 @@ pub fn track(
         filter_seconds,
         interrupted,
         skipped: source.skipped().to_vec(),
+        stopped,
         trajectory: traj,
     })
 }

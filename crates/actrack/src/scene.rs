@@ -523,6 +523,7 @@ impl Scene {
                 ));
             }
         }
+        check_plausible(&scene, path)?;
         Ok(scene)
     }
 
@@ -619,6 +620,97 @@ impl Scene {
         }
         out
     }
+}
+
+/// Camera distance to the table centre a tracking setup can have (metres).
+pub const CAMERA_DISTANCE_RANGE: (f64, f64) = (0.3, 20.0);
+/// Least elevation (degrees) of a camera above the table plane, seen from the table centre:
+/// lower, the table plane (where θ lives) is seen edge-on.
+pub const MIN_CAMERA_ELEVATION_DEG: f64 = 10.0;
+/// Farthest the actor's shoulder may be from the nearest point of the table region (metres):
+/// a seated adult reaches about 0.7 m.
+pub const MAX_ACTOR_TABLE_DISTANCE: f64 = 1.0;
+/// Segment lengths (metres) a human arm has (upper arm, elbow → fingertip).
+pub const ARM_LENGTH_RANGE: (f64, f64) = (0.1, 1.0);
+/// Largest arm radius or hand half-axis (metres).
+pub const MAX_ARM_THICKNESS: f64 = 0.3;
+
+/// Plausibility of a well-typed scene: cameras at a distance and height from which the table
+/// is seen, the actor within reach of the table, an arm of human size.
+fn check_plausible(scene: &Scene, path: &Path) -> Result<()> {
+    let bad = |field: &str, msg: String| Error::invalid(path, format!("{field}: {msg}"));
+    let centre = scene.table.placement.origin;
+    for (i, c) in scene.cameras.iter().enumerate() {
+        let eye = c.centre();
+        let d = (eye - centre).norm();
+        let (lo, hi) = CAMERA_DISTANCE_RANGE;
+        if !(lo..=hi).contains(&d) {
+            return Err(bad(
+                &format!("camera[{i}] (`{}`)", c.name),
+                format!(
+                    "{d:.2} m from the table centre; a camera filming an arm at a table is \
+                     {lo}–{hi} m away (are the units metres?)"
+                ),
+            ));
+        }
+        let above = eye.z - centre.z;
+        let elevation = (above / d).asin().to_degrees();
+        if elevation < MIN_CAMERA_ELEVATION_DEG {
+            return Err(bad(
+                &format!("camera[{i}] (`{}`)", c.name),
+                format!(
+                    "{above:.2} m above the table plane ({elevation:.1}° seen from the table \
+                     centre): it must look down on the table from at least \
+                     {MIN_CAMERA_ELEVATION_DEG}° above its plane"
+                ),
+            ));
+        }
+    }
+    // Distance from the shoulder to the table region (a rectangle at the table height).
+    let local = scene.table.placement.from_world(&scene.actor.origin);
+    let h = scene.table.half_extents;
+    let dx = (local.x.abs() - h[0]).max(0.0);
+    let dy = (local.y.abs() - h[1]).max(0.0);
+    let reach = (dx * dx + dy * dy + local.z * local.z).sqrt();
+    if reach > MAX_ACTOR_TABLE_DISTANCE {
+        return Err(bad(
+            "actor.origin",
+            format!(
+                "the shoulder is {reach:.2} m from the nearest point of the table region; an \
+                 actor works within {MAX_ACTOR_TABLE_DISTANCE} m of it"
+            ),
+        ));
+    }
+    let a = &scene.arm;
+    let (lo, hi) = ARM_LENGTH_RANGE;
+    for (key, v) in [
+        ("arm.upper_arm_length", a.upper_arm_length),
+        ("arm.lower_arm_length", a.lower_arm_length),
+    ] {
+        if let Some(l) = v
+            && !(lo..=hi).contains(&l)
+        {
+            return Err(bad(
+                key,
+                format!("{l} m; a human arm segment is {lo}–{hi} m long"),
+            ));
+        }
+    }
+    let thick = a
+        .upper_arm_radii
+        .iter()
+        .chain(&a.forearm_radii)
+        .chain(&a.hand_half_axes)
+        .fold(0.0f64, |m, v| m.max(*v));
+    if thick > MAX_ARM_THICKNESS {
+        return Err(bad(
+            "arm",
+            format!(
+                "a radius or hand half-axis of {thick} m; a human arm's are below {MAX_ARM_THICKNESS} m"
+            ),
+        ));
+    }
+    Ok(())
 }
 
 fn finite(v: &[f64]) -> bool {

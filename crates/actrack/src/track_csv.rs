@@ -117,23 +117,22 @@ impl Trajectory {
 
     /// Writes the CSV to `path` (through a temporary file renamed into place).
     pub fn save(&self, path: &Path) -> Result<()> {
-        let tmp = temp_path(path);
-        let file = std::fs::File::create(&tmp).map_err(|e| Error::write(&tmp, e))?;
-        self.write_to(std::io::BufWriter::new(file))
-            .map_err(|e| Error::write(&tmp, e))?;
-        std::fs::rename(&tmp, path).map_err(|e| Error::write(path, e))
+        self.save_with_comment(path, "")
     }
 
     /// Writes the CSV to `path` with `comment` (lines starting with `#`, such as
     /// [`crate::TrackConfig::to_comment`]) before the header.
     pub fn save_with_comment(&self, path: &Path, comment: &str) -> Result<()> {
         let tmp = temp_path(path);
-        let file = std::fs::File::create(&tmp).map_err(|e| Error::write(&tmp, e))?;
+        let file = std::fs::File::create(&tmp).map_err(|e| Error::write(path, e))?;
+        let mut guard = TempGuard::new(&tmp);
         let mut out = std::io::BufWriter::new(file);
         out.write_all(comment.as_bytes())
             .and_then(|()| self.write_to(out))
-            .map_err(|e| Error::write(&tmp, e))?;
-        std::fs::rename(&tmp, path).map_err(|e| Error::write(path, e))
+            .map_err(|e| Error::write(path, e))?;
+        std::fs::rename(&tmp, path).map_err(|e| Error::write(path, e))?;
+        guard.keep();
+        Ok(())
     }
 
     /// Reads a trajectory CSV (ground truth or tracker output).
@@ -196,6 +195,18 @@ impl Trajectory {
             let mut pose = [0.0; 9];
             for j in 0..9 {
                 pose[j] = num(base[5 + j])?;
+                if !pose[j].is_finite() {
+                    return Err(Error::parse(
+                        path,
+                        ln + 1,
+                        format!(
+                            "column `{}`: `{}` is not a finite coordinate (every pose column \
+                             needs a number)",
+                            cols[base[5 + j]],
+                            f[base[5 + j]]
+                        ),
+                    ));
+                }
             }
             let posterior = post
                 .iter()
@@ -219,6 +230,35 @@ impl Trajectory {
             actions: post.into_iter().map(|(a, _)| a).collect(),
             rows,
         })
+    }
+}
+
+/// Removes a temporary file when dropped, unless [`TempGuard::keep`] was called (after the
+/// file was renamed into place): no error path leaves a `.name.tmp-<pid>` behind.
+#[derive(Debug)]
+pub struct TempGuard {
+    path: Option<std::path::PathBuf>,
+}
+
+impl TempGuard {
+    /// Guards `path`.
+    pub fn new(path: &Path) -> Self {
+        Self {
+            path: Some(path.to_path_buf()),
+        }
+    }
+
+    /// The file is in place: do not remove it.
+    pub fn keep(&mut self) {
+        self.path = None;
+    }
+}
+
+impl Drop for TempGuard {
+    fn drop(&mut self) {
+        if let Some(p) = self.path.take() {
+            let _ = std::fs::remove_file(p);
+        }
     }
 }
 

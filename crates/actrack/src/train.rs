@@ -230,6 +230,14 @@ pub struct ActionScore {
     pub log_likelihood: f64,
     /// θ̂_a (actor frame, metres).
     pub theta: [f64; 2],
+    /// Standard deviation of θ̂_a per axis (metres): the Laplace approximation of its
+    /// posterior, from the curvature of the log-likelihood (plus the prior, for partial
+    /// sequences) at θ̂_a.
+    pub theta_std: [f64; 2],
+    /// θ̂_a lies on the border of the action's θ support (the training θ box widened by
+    /// [`THETA_SUPPORT_MARGIN`]), where partial sequences confine it: the sequence points
+    /// further out than the model was trained for.
+    pub theta_at_bound: bool,
 }
 
 /// Recognition result for one sequence.
@@ -241,6 +249,11 @@ pub struct Classification {
     pub action: String,
     /// Its θ̂.
     pub theta: [f64; 2],
+    /// Its θ̂'s standard deviation per axis (metres, see [`ActionScore::theta_std`]).
+    pub theta_std: [f64; 2],
+    /// Its θ̂ lies on the border of the action's θ support (see
+    /// [`ActionScore::theta_at_bound`]).
+    pub theta_at_bound: bool,
 }
 
 /// Standard deviation (metres) of the isotropic noise added to every state's covariance when a
@@ -255,6 +268,55 @@ pub struct Classification {
 /// first 75 % of the movement: reach θ median / p90 5.6 / 14.4 and 3.6 / 25.5 cm without,
 /// 3.2 / 5.8 and 3.8 / 4.6 cm with 1 cm; 0.5 and 2 cm gave similar figures).
 pub const PARTIAL_COV_INFLATION: f64 = 0.01;
+
+/// Margin (metres) by which an action's θ support extends beyond the box of its training θ.
+/// θ of a partial sequence is estimated within that support: a movement seen in part carries
+/// little information on where it ends, and an unconstrained estimate can leave the table
+/// entirely (tens of centimetres outside every training target).
+pub const THETA_SUPPORT_MARGIN: f64 = 0.05;
+
+/// The θ support of an action (lower and upper corner, actor frame, metres): its training θ
+/// box widened by [`THETA_SUPPORT_MARGIN`].
+pub fn theta_support(a: &Action) -> ([f64; 2], [f64; 2]) {
+    let m = THETA_SUPPORT_MARGIN;
+    (
+        [a.theta_min[0] - m, a.theta_min[1] - m],
+        [a.theta_max[0] + m, a.theta_max[1] + m],
+    )
+}
+
+/// Standard deviation per axis of θ̂ by the Laplace approximation: the inverse of the negative
+/// Hessian of `objective` at `theta` (central differences, 5 mm steps). Where the curvature is
+/// not positive definite the sequence does not pin θ down, and `fallback` (the spread of the
+/// support) is returned.
+fn laplace_std(
+    objective: &dyn Fn(&[f64; 2]) -> Option<f64>,
+    theta: [f64; 2],
+    fallback: [f64; 2],
+) -> [f64; 2] {
+    let h = 0.005;
+    let f = |du: f64, dv: f64| objective(&[theta[0] + du, theta[1] + dv]);
+    let (Some(f0), Some(fpu), Some(fmu), Some(fpv), Some(fmv)) =
+        (f(0.0, 0.0), f(h, 0.0), f(-h, 0.0), f(0.0, h), f(0.0, -h))
+    else {
+        return fallback;
+    };
+    let (Some(fpp), Some(fpm), Some(fmp), Some(fmm)) = (f(h, h), f(h, -h), f(-h, h), f(-h, -h))
+    else {
+        return fallback;
+    };
+    let huu = (fpu - 2.0 * f0 + fmu) / (h * h);
+    let hvv = (fpv - 2.0 * f0 + fmv) / (h * h);
+    let huv = (fpp - fpm - fmp + fmm) / (4.0 * h * h);
+    // Negative Hessian = information matrix [[a, b], [b, c]].
+    let (a, b, c) = (-huu, -huv, -hvv);
+    let det = a * c - b * b;
+    if !(a > 0.0 && c > 0.0 && det > 0.0 && det.is_finite()) {
+        return fallback;
+    }
+    let (su, sv) = ((c / det).sqrt(), (a / det).sqrt());
+    [su.min(fallback[0]), sv.min(fallback[1])]
+}
 
 /// The observation coordinates of the fingertip r in the PHMM observation (p, q, r).
 pub const FINGERTIP_COORDINATES: [usize; 3] = [6, 7, 8];
@@ -424,6 +486,8 @@ impl<'a> Classifier<'a> {
                     .clone()
                     .try_inverse()
                     .unwrap_or_else(|| DMatrix::identity(2, 2));
+                let (lo, hi) = theta_support(a);
+                let bounds = (DVector::from_row_slice(&lo), DVector::from_row_slice(&hi));
                 let mut best: Option<(f64, actrack_phmm::ThetaEstimate)> = None;
                 for init in starts {
                     let opts = ThetaEmOptions {
@@ -431,6 +495,7 @@ impl<'a> Classifier<'a> {
                         prior: self
                             .partial_prior
                             .then(|| (mean.clone(), prior_cov.clone())),
+                        bounds: Some(bounds.clone()),
                         ..ThetaEmOptions::default()
                     };
                     let est = em_model.estimate_theta(em_x, &opts).map_err(err)?;
@@ -459,10 +524,39 @@ impl<'a> Classifier<'a> {
                     .log_likelihood(x, est.theta.as_slice())
                     .map_err(err)?,
             };
+            let theta = [est.theta[0], est.theta[1]];
+            let (lo, hi) = theta_support(a);
+            // The uniform distribution over the support: what is known without the sequence.
+            let fallback = [
+                (hi[0] - lo[0]) / 12f64.sqrt(),
+                (hi[1] - lo[1]) / 12f64.sqrt(),
+            ];
+            let prior_inv = if partial && self.partial_prior {
+                let c = a.theta_cov;
+                let (p, q, r) = (c[0][0].max(1e-4), c[0][1], c[1][1].max(1e-4));
+                let det = p * r - q * q;
+                (det > 0.0).then(|| [r / det, -q / det, p / det])
+            } else {
+                None
+            };
+            let objective = |t: &[f64; 2]| {
+                let ll = em_model.log_likelihood(em_x, t).ok()?;
+                let lp = prior_inv.map_or(0.0, |[iuu, iuv, ivv]| {
+                    let (du, dv) = (t[0] - a.theta_mean[0], t[1] - a.theta_mean[1]);
+                    -0.5 * (iuu * du * du + 2.0 * iuv * du * dv + ivv * dv * dv)
+                });
+                Some(ll + lp).filter(|v| v.is_finite())
+            };
+            let theta_std = laplace_std(&objective, theta, fallback);
+            let tol = 1e-6;
+            let theta_at_bound =
+                partial && (0..2).any(|k| theta[k] <= lo[k] + tol || theta[k] >= hi[k] - tol);
             scores.push(ActionScore {
                 action: a.name.clone(),
                 log_likelihood,
-                theta: [est.theta[0], est.theta[1]],
+                theta,
+                theta_std,
+                theta_at_bound,
             });
         }
         let best = scores
@@ -473,6 +567,8 @@ impl<'a> Classifier<'a> {
         Ok(Classification {
             action: scores[best].action.clone(),
             theta: scores[best].theta,
+            theta_std: scores[best].theta_std,
+            theta_at_bound: scores[best].theta_at_bound,
             scores,
         })
     }

@@ -467,9 +467,10 @@ fn bad_input_names_the_frame_with_exit_code_2() {
         &track(&f.root, "cut.y4m", &["-o", "cut.mcap"], None),
         &[&format!("frame {}", n - 1), "truncated"],
     );
+    // The frames before the cut are kept: the MCAP is finished with them.
     assert!(
-        !f.root.join("cut.mcap").exists(),
-        "no half-written output under the final name"
+        std::fs::metadata(f.root.join("cut.mcap")).is_ok_and(|m| m.len() > 0),
+        "the frames tracked before the cut are kept"
     );
     // Frames of another size than the scene's camera.
     let big = f.root.join("big");
@@ -544,7 +545,7 @@ fn sigterm_finishes_a_valid_mcap() {
         .status();
     let out = child.wait_with_output().unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(130), "{err}");
+    assert_eq!(out.status.code(), Some(143), "{err}");
     assert!(err.contains("interrupted"), "{err}");
     let bytes = std::fs::read(f.root.join("int.mcap")).unwrap();
     assert!(bytes.len() > 100);

@@ -23,6 +23,11 @@ pub struct ThetaEmOptions {
     pub prior: Option<(DVector<f64>, DMatrix<f64>)>,
     /// Also start from every distinct training θ and keep the best final objective.
     pub multi_start: bool,
+    /// A box `(lower, upper)` in caller units that θ is confined to: each M-step maximises
+    /// the EM objective over the box (exactly, by projected coordinate ascent on its concave
+    /// quadratic), so the estimate stays in the region a model supports even when the
+    /// sequence (a movement seen only in part) pulls it outside. `None`: unconstrained.
+    pub bounds: Option<(DVector<f64>, DVector<f64>)>,
 }
 
 impl Default for ThetaEmOptions {
@@ -33,6 +38,7 @@ impl Default for ThetaEmOptions {
             tolerance: 1e-6,
             prior: None,
             multi_start: false,
+            bounds: None,
         }
     }
 }
@@ -126,6 +132,32 @@ impl Phmm {
                 Some((DVector::from_vec(mi), li))
             }
         };
+        let bounds = match &opts.bounds {
+            None => None,
+            Some((lo, hi)) => {
+                check_theta(self, lo.as_slice(), "lower θ bound")?;
+                check_theta(self, hi.as_slice(), "upper θ bound")?;
+                if let Some(k) = (0..p).find(|&k| lo[k] > hi[k]) {
+                    return Err(PhmmError::InvalidParameter {
+                        name: "bounds",
+                        reason: format!(
+                            "lower bound {} exceeds upper bound {} in θ component {k}",
+                            lo[k], hi[k]
+                        ),
+                    });
+                }
+                let (mut li, mut hi_i) = (vec![0.0; p], vec![0.0; p]);
+                self.theta_internal(lo.as_slice(), &mut li);
+                self.theta_internal(hi.as_slice(), &mut hi_i);
+                // A negative scale would swap the ends.
+                let (l, h): (Vec<f64>, Vec<f64>) = li
+                    .iter()
+                    .zip(&hi_i)
+                    .map(|(a, b)| (a.min(*b), a.max(*b)))
+                    .unzip();
+                Some((l, h))
+            }
+        };
         let mut starts: Vec<Vec<f64>> = Vec::new();
         match &opts.init {
             Some(t) => {
@@ -142,12 +174,26 @@ impl Phmm {
                 }
             }
         }
+        if let Some((lo, hi)) = &bounds {
+            for s in &mut starts {
+                for k in 0..p {
+                    s[k] = s[k].clamp(lo[k], hi[k]);
+                }
+            }
+        }
         let kernel = ThetaKernel::new(self);
         let mut ws = Workspace::default();
         ws.load_sequence(x);
         let mut best: Option<(f64, RunResult)> = None;
         for s in starts {
-            let run = self.theta_em_run(&mut ws, x.nrows(), &kernel, s, prior.as_ref(), opts)?;
+            let run = self.theta_em_run(
+                &mut ws,
+                x.nrows(),
+                &kernel,
+                s,
+                (prior.as_ref(), bounds.as_ref()),
+                opts,
+            )?;
             if best.as_ref().is_none_or(|b| run.2 > b.0) {
                 best = Some((run.2, run));
             }
@@ -174,7 +220,10 @@ impl Phmm {
         t_len: usize,
         kernel: &ThetaKernel,
         mut theta: Vec<f64>,
-        prior: Option<&(DVector<f64>, DMatrix<f64>)>,
+        (prior, bounds): (
+            Option<&(DVector<f64>, DMatrix<f64>)>,
+            Option<&(Vec<f64>, Vec<f64>)>,
+        ),
         opts: &ThetaEmOptions,
     ) -> Result<RunResult, PhmmError> {
         let (n, d, p) = (self.n, self.d, self.p);
@@ -248,13 +297,25 @@ impl Phmm {
                     }
                 }
             }
-            let new_theta = match prior {
-                None => solve_spd_or_ridge(&h, &g, &theta),
-                Some((m0, l0)) => {
+            let new_theta = match (prior, bounds) {
+                (None, None) => solve_spd_or_ridge(&h, &g, &theta),
+                (Some((m0, l0)), None) => {
                     // (Λ H + I) θ = Λ g + θ0  ⇔  θ = (H + Λ⁻¹)⁻¹ (g + Λ⁻¹ θ0), no inverse formed.
                     let a = l0 * &h + DMatrix::identity(p, p);
                     let rhs = l0 * &g + m0;
                     a.lu().solve(&rhs).map(|v| v.as_slice().to_vec())
+                }
+                (prior, Some((lo, hi))) => {
+                    // Maximise gᵀθ − ½ θᵀHθ (plus the log prior) over the box.
+                    let (mut hq, mut gq) = (h.clone(), g.clone());
+                    if let Some((m0, l0)) = prior {
+                        let Some(li) = l0.clone().try_inverse() else {
+                            return Ok((theta, ll, obj, iterations, history));
+                        };
+                        gq += &li * m0;
+                        hq += li;
+                    }
+                    Some(box_qp(&hq, &gq, &theta, lo, hi))
                 }
             };
             let Some(new_theta) = new_theta.filter(|t| t.iter().all(|v| v.is_finite())) else {
@@ -282,6 +343,31 @@ impl Phmm {
             }
         }
     }
+}
+
+/// Maximises `gᵀθ − ½ θᵀHθ` (H symmetric positive semi-definite) over the box `[lo, hi]` by
+/// projected coordinate ascent from `start` (inside the box): every coordinate step maximises
+/// exactly along its axis, so the objective never decreases (a generalised EM step) and the
+/// sweeps converge to the box optimum.
+fn box_qp(h: &DMatrix<f64>, g: &DVector<f64>, start: &[f64], lo: &[f64], hi: &[f64]) -> Vec<f64> {
+    let p = h.nrows();
+    let mut t: Vec<f64> = (0..p).map(|k| start[k].clamp(lo[k], hi[k])).collect();
+    for _ in 0..200 {
+        let mut moved = 0.0f64;
+        for k in 0..p {
+            if h[(k, k)] <= 0.0 {
+                continue;
+            }
+            let rest: f64 = (0..p).filter(|&j| j != k).map(|j| h[(k, j)] * t[j]).sum();
+            let v = ((g[k] - rest) / h[(k, k)]).clamp(lo[k], hi[k]);
+            moved = moved.max((v - t[k]).abs());
+            t[k] = v;
+        }
+        if moved < 1e-12 {
+            break;
+        }
+    }
+    t
 }
 
 /// Solve `H θ = g` by Cholesky; if H is singular (W ≈ 0 for every visited state), add a tiny
@@ -330,6 +416,7 @@ pub fn recognise(
                 let o = ThetaEmOptions {
                     init: None,
                     prior: None,
+                    bounds: None,
                     ..opts.clone()
                 };
                 m.estimate_theta(x, &o)

@@ -912,6 +912,7 @@ PyPhmm,
             tolerance: tol,
             prior,
             multi_start,
+            bounds: None,
         };
         let est = py
             .detach(|| self.inner.estimate_theta(&x, &opts))

@@ -215,6 +215,7 @@ impl Importer {
         let mut data = match read_source(path, &wanted)? {
             Source::Markers(d) => d,
             Source::Joints(jt) => {
+                check_joints_units_and_frame(path, &jt.arm)?;
                 let frame = ActorFrame {
                     origin: [0.0; 3],
                     heading_deg: 0.0,
@@ -297,6 +298,7 @@ impl Importer {
                     .collect(),
             ),
         ];
+        check_arm_lengths(path, arm_lengths)?;
         Ok(Trial {
             source: path.to_path_buf(),
             arm: side,
@@ -310,6 +312,83 @@ impl Importer {
         })
     }
 }
+
+/// Median upper-arm (shoulder → elbow) and elbow → fingertip lengths of a trajectory, metres
+/// (frames with a non-finite joint skipped).
+fn median_segment_lengths(arm: &ArmTrajectory) -> [f64; 2] {
+    let seg = |a: &[nalgebra::Vector3<f64>], b: &[nalgebra::Vector3<f64>]| {
+        median(
+            a.iter()
+                .zip(b)
+                .map(|(x, y)| (y - x).norm())
+                .filter(|d| d.is_finite())
+                .collect(),
+        )
+    };
+    [seg(&arm.p, &arm.q), seg(&arm.q, &arm.r)]
+}
+
+/// Segment lengths (metres) a human arm has: shoulder → elbow and elbow → fingertip.
+pub const HUMAN_SEGMENT_RANGE: (f64, f64) = (0.1, 1.0);
+
+/// Refuses arm segments no human has, naming millimetres when the lengths are a thousand
+/// times too long.
+fn check_arm_lengths(path: &Path, l: [f64; 2]) -> Result<()> {
+    let (lo, hi) = HUMAN_SEGMENT_RANGE;
+    if l.iter().all(|v| (lo..=hi).contains(v)) {
+        return Ok(());
+    }
+    let hint = if l.iter().all(|v| (lo * 1000.0..=hi * 1000.0).contains(v)) {
+        ": the coordinates look like millimetres; actrack reads metres (divide them by 1000)"
+    } else if l.iter().all(|v| (lo * 100.0..=hi * 100.0).contains(v)) {
+        ": the coordinates look like centimetres; actrack reads metres (divide them by 100)"
+    } else {
+        ""
+    };
+    Err(Error::invalid(
+        path,
+        format!(
+            "implausible arm: shoulder → elbow {:.3} and elbow → fingertip {:.3} (median, in the \
+             file's units) where a human arm has {lo}–{hi} m per segment{hint}",
+            l[0], l[1]
+        ),
+    ))
+}
+
+/// A joint-trajectory CSV must be in metres and in the actor frame (origin at the acting
+/// shoulder at rest): refuses millimetres, and a shoulder far from the origin (a world-frame
+/// track, such as the ground truth `synth` and `demo` write).
+fn check_joints_units_and_frame(path: &Path, arm: &ArmTrajectory) -> Result<()> {
+    check_arm_lengths(path, median_segment_lengths(arm))?;
+    let mut p: Vec<(f64, nalgebra::Vector3<f64>)> = arm
+        .p
+        .iter()
+        .filter(|v| v.iter().all(|c| c.is_finite()))
+        .map(|v| (v.norm(), *v))
+        .collect();
+    p.sort_by(|a, b| a.0.total_cmp(&b.0));
+    if let Some((d, v)) = p.get(p.len() / 2)
+        && *d > MAX_SHOULDER_OFFSET
+    {
+        return Err(Error::invalid(
+            path,
+            format!(
+                "the shoulder is at ({:.2}, {:.2}, {:.2}) m (median), {d:.2} m from the origin: a \
+                 joint-trajectory CSV must be in the actor frame (origin at the acting shoulder at \
+                 rest, within {MAX_SHOULDER_OFFSET} m); this looks like a world-frame track such \
+                 as the truth.csv of `synth` or `demo` (subtract the scene's [actor] origin and \
+                 rotate by its heading first)",
+                v[0], v[1], v[2]
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// How far (metres) the shoulder of a joint-trajectory CSV may lie from the actor-frame origin
+/// (the shoulder at rest) in the median frame: trunk lean during a reach moves it by a few
+/// centimetres to a couple of decimetres.
+pub const MAX_SHOULDER_OFFSET: f64 = 0.35;
 
 /// What a movement file holds.
 #[derive(Clone, Debug)]

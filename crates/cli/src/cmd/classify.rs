@@ -157,6 +157,7 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
             .map(|r| {
                 let mut o = serde_json::json!({
                     "file": r.file, "recognised": r.result.action, "theta": r.result.theta,
+                    "theta_std": r.result.theta_std, "theta_at_bound": r.result.theta_at_bound,
                     "scores": r.result.scores,
                 });
                 if labelled {
@@ -183,9 +184,16 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
             );
         }
         print!(
-            "  recognised: {}  θ = ({:+.3}, {:+.3}) m",
-            r.result.action, r.result.theta[0], r.result.theta[1]
+            "  recognised: {}  θ = ({:+.3}, {:+.3}) m ± ({:.3}, {:.3}) m",
+            r.result.action,
+            r.result.theta[0],
+            r.result.theta[1],
+            r.result.theta_std[0],
+            r.result.theta_std[1]
         );
+        if r.result.theta_at_bound {
+            print!("  [θ at the border of the model's θ support]");
+        }
         if labelled {
             print!(
                 "  (true: {}, θ error {:.1} cm)",

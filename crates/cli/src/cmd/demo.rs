@@ -95,7 +95,7 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
     );
     println!("(from a checkout: `cargo run --release -p actrack-cli -- track …`)");
     if r.track.interrupted {
-        return Ok(ExitCode::from(130));
+        return Ok(super::track::interrupted_code());
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -59,6 +59,13 @@ fn parse_action(s: &str) -> Result<(String, Option<[f64; 2]>), String> {
     Ok((name.to_string(), Some([v[0], v[1]])))
 }
 
+/// Largest frame `--size` renders (pixels): 8K UHD; larger frames exhaust memory before the
+/// first one is drawn.
+pub const MAX_PIXELS: u64 = 7680 * 4320;
+
+/// How far (metres) beyond the scene's table region a `--action` θ may lie.
+pub const MAX_THETA_OUTSIDE_TABLE: f64 = 0.3;
+
 /// Runs `synth`.
 pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
     if !(args.fps.is_finite() && args.fps > 0.0) {
@@ -76,6 +83,16 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
                 .ok_or_else(|| {
                     super::UsageError(format!("--size {}: expected WxH, e.g. 320x240", args.size))
                 })?;
+            if u64::from(w) * u64::from(h) > MAX_PIXELS {
+                return Err(super::UsageError(format!(
+                    "--size {}: {} megapixels per frame is more than the {} the renderer \
+                     allows (e.g. 3840x2160)",
+                    args.size,
+                    u64::from(w) * u64::from(h) / 1_000_000,
+                    MAX_PIXELS / 1_000_000
+                ))
+                .into());
+            }
             default_scene(w, h)
         }
     };
@@ -90,6 +107,20 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
         let theta = theta.unwrap_or_else(|| {
             random_targets(&scene, &[name.as_str()], args.seed.wrapping_add(i as u64))[0].1
         });
+        let (c, h) = scene.theta_region();
+        let (lo, hi) = ([c[0] - h[0], c[1] - h[1]], [c[0] + h[0], c[1] + h[1]]);
+        let off = (0..2)
+            .map(|k| (lo[k] - theta[k]).max(theta[k] - hi[k]).max(0.0))
+            .fold(0.0f64, f64::max);
+        if off > MAX_THETA_OUTSIDE_TABLE {
+            return Err(super::UsageError(format!(
+                "--action {a}: θ is {off:.2} m outside the scene's table region (u in \
+                 [{:.2}, {:.2}], v in [{:.2}, {:.2}] m, actor frame); at most \
+                 {MAX_THETA_OUTSIDE_TABLE} m beyond it is within an arm's reach",
+                lo[0], hi[0], lo[1], hi[1]
+            ))
+            .into());
+        }
         actions.push((name, theta));
     }
     let source = model

@@ -2,6 +2,7 @@
 
 use std::path::PathBuf;
 use std::process::ExitCode;
+use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use actrack::frames::{FrameOptions, FrameSource};
@@ -10,19 +11,43 @@ use actrack::pipeline::{TrackOutputs, track};
 use actrack::scene::Scene;
 
 /// Set by Ctrl-C / SIGTERM; the pipeline finishes the outputs with the frames done so far.
-pub static STOP: AtomicBool = AtomicBool::new(false);
+pub static STOP: std::sync::LazyLock<Arc<AtomicBool>> =
+    std::sync::LazyLock::new(|| Arc::new(AtomicBool::new(false)));
 
-/// Installs the Ctrl-C / SIGTERM handler (once).
+/// Set by SIGTERM (exit code 143 = 128 + 15 instead of 130 for Ctrl-C).
+static TERMINATED: std::sync::LazyLock<Arc<AtomicBool>> =
+    std::sync::LazyLock::new(|| Arc::new(AtomicBool::new(false)));
+
+/// Installs the Ctrl-C / SIGTERM handlers (a second signal exits at once).
+#[cfg(unix)]
+pub fn install_stop_handler() {
+    use signal_hook::consts::{SIGINT, SIGTERM};
+    use signal_hook::flag;
+    // The conditional exits first: they fire only once STOP is already set (a second signal).
+    let _ = flag::register_conditional_shutdown(SIGINT, 130, Arc::clone(&STOP));
+    let _ = flag::register_conditional_shutdown(SIGTERM, 143, Arc::clone(&STOP));
+    let _ = flag::register(SIGTERM, Arc::clone(&TERMINATED));
+    let _ = flag::register(SIGINT, Arc::clone(&STOP));
+    let _ = flag::register(SIGTERM, Arc::clone(&STOP));
+}
+
+/// Installs the Ctrl-C handler (a second Ctrl-C exits at once).
+#[cfg(windows)]
 pub fn install_stop_handler() {
     let _ = ctrlc::set_handler(|| {
         if STOP.swap(true, Ordering::SeqCst) {
-            // Second signal: give up at once.
             std::process::exit(130);
         }
-        eprintln!(
-            "\ninterrupted: finishing the outputs with the frames done so far (Ctrl-C again to abort)"
-        );
     });
+}
+
+/// The exit code of an interrupted run: 143 after SIGTERM, 130 after Ctrl-C.
+pub fn interrupted_code() -> ExitCode {
+    ExitCode::from(if TERMINATED.load(Ordering::SeqCst) {
+        143
+    } else {
+        130
+    })
 }
 
 /// Options of `track`.
@@ -82,6 +107,18 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
     }
     let model = ActionModel::load(&args.model)?;
     let scene = Scene::load(&args.scene)?;
+    if scene.cameras.len() != 1 {
+        return Err(actrack::Error::invalid(
+            &args.scene,
+            format!(
+                "has {} [[camera]]s but track reads one video ({}): give a scene with only the \
+                 camera that filmed it",
+                scene.cameras.len(),
+                args.input.display()
+            ),
+        )
+        .into());
+    }
     let mut source = FrameSource::open(
         &args.input,
         &FrameOptions {
@@ -134,12 +171,27 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
             eprintln!("{what}: {}", p.display());
         }
     }
+    if let Some(why) = &summary.stopped {
+        eprintln!(
+            "warning: the input broke off after {} frames: {why}; the outputs hold the {} frames \
+             tracked before",
+            summary.frames, summary.frames
+        );
+        if !args.skip_bad_frames {
+            return Err(super::UsageError(format!(
+                "{}: stopped after {} frames (outputs finished with them): {why}",
+                args.input.display(),
+                summary.frames
+            ))
+            .into());
+        }
+    }
     if summary.interrupted {
         eprintln!(
             "interrupted after {} frames: the outputs hold the frames done so far",
             summary.frames
         );
-        return Ok(ExitCode::from(130));
+        return Ok(interrupted_code());
     }
     Ok(ExitCode::SUCCESS)
 }
