@@ -390,6 +390,9 @@ pub struct CalibrationInput {
     pub corners: Vec<[f64; 2]>,
     /// The table's size: along its near edge and across it, metres.
     pub table_size: [f64; 2],
+    /// The size of the region where the targets lie (the scene's table region), centred on the
+    /// table; `None`: the whole table.
+    pub region_size: Option<[f64; 2]>,
     /// Height of the table surface above the floor, metres.
     pub table_height: f64,
     /// The acting arm.
@@ -415,6 +418,8 @@ pub struct Calibration {
     pub rms_error_px: f64,
     /// Height of the acting shoulder above the table surface, metres.
     pub shoulder_above_table: f64,
+    /// The table's corners in the world (near-left, near-right, far-right, far-left).
+    pub table_corners: [Vector3<f64>; 4],
 }
 
 impl Calibration {
@@ -648,15 +653,26 @@ pub fn calibrate(input: &CalibrationInput) -> Result<Calibration> {
     if !(input.max_error_px.is_finite() && input.max_error_px > 0.0) {
         return Err(Error::Config("the error threshold must be positive".into()));
     }
+    let [rx, ry] = input.region_size.unwrap_or(input.table_size);
+    if !(rx.is_finite() && ry.is_finite() && rx > 0.0 && ry > 0.0 && rx <= sx && ry <= sy) {
+        return Err(Error::Config(format!(
+            "the target region {rx} × {ry} m must be positive and fit on the {sx} × {sy} m table"
+        )));
+    }
     check_quadrilateral(&input.corners)?;
-    let table = TableRegion {
-        placement: Placement {
-            origin: Vector3::new(0.0, 0.0, input.table_height),
-            yaw: 0.0,
-        },
-        half_extents: [sx / 2.0, sy / 2.0],
+    let placement = Placement {
+        origin: Vector3::new(0.0, 0.0, input.table_height),
+        yaw: 0.0,
     };
-    let world = table.corners();
+    let world = TableRegion {
+        placement,
+        half_extents: [sx / 2.0, sy / 2.0],
+    }
+    .corners();
+    let table = TableRegion {
+        placement,
+        half_extents: [rx / 2.0, ry / 2.0],
+    };
     let size = (input.width, input.height);
     let (r, t) = solve_pose(&input.intrinsics, size, &world, &input.corners)?;
     let camera = input.intrinsics.camera(input.width, input.height, r, t);
@@ -746,6 +762,7 @@ pub fn calibrate(input: &CalibrationInput) -> Result<Calibration> {
         corner_errors_px: errs,
         rms_error_px: rms,
         shoulder_above_table: above,
+        table_corners: world,
     })
 }
 
@@ -787,9 +804,10 @@ fn ring(img: &mut RgbImage, u: f64, v: f64, r: f64, c: [u8; 3]) {
     }
 }
 
-/// Draws the calibration on a frame: the table outline (yellow), the world axes at the table's
-/// centre (x red, y green, z blue, 20 cm), the given corners (white crosses) and their
-/// reprojections (cyan rings), the shoulder (magenta ring) and the contour of the arm in
+/// Draws the calibration on a frame: the table outline (yellow), the target region (white, when
+/// smaller than the table), the world axes at the table's centre (x red, y green, z blue, 20 cm),
+/// the given corners (white crosses) and their reprojections (cyan rings), the shoulder (magenta
+/// ring) and the contour of the arm in
 /// `rest_pose_actor` (actor frame, metres) with `lengths` (L1, L2), in orange.
 pub fn draw_preview(
     img: &mut RgbImage,
@@ -800,9 +818,13 @@ pub fn draw_preview(
 ) {
     let scene = &cal.scene;
     let cam = &scene.cameras[0];
-    let k = scene.table.corners();
+    let k = cal.table_corners;
+    let region = scene.table.corners();
     for i in 0..4 {
         world_line(img, cam, &k[i], &k[(i + 1) % 4], [255, 230, 0]);
+        if region != k {
+            world_line(img, cam, &region[i], &region[(i + 1) % 4], [255, 255, 255]);
+        }
     }
     let o = scene.table.placement.origin;
     for (axis, c) in [

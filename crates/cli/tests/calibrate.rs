@@ -47,6 +47,7 @@ fn input(cam: &Camera, corners: Vec<[f64; 2]>, shoulder: [f64; 2], above: f64) -
         },
         corners,
         table_size: TABLE_SIZE,
+        region_size: None,
         table_height: TABLE_HEIGHT,
         side: Side::Right,
         shoulder_px: shoulder,

@@ -28,6 +28,10 @@ pub struct Args {
     /// The table's size in metres: along its near edge, then across it ("1.2,0.8").
     #[arg(long)]
     pub table_size: String,
+    /// The size of the region where the targets lie, centred on the table, in metres ("0.6,0.3";
+    /// default: the whole table).
+    #[arg(long)]
+    pub region: Option<String>,
     /// Height of the table surface above the floor in metres.
     #[arg(long, default_value_t = 0.75)]
     pub table_height: f64,
@@ -139,6 +143,11 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
         intrinsics,
         corners: corners.clone(),
         table_size: pair(&args.table_size, "--table-size")?,
+        region_size: args
+            .region
+            .as_deref()
+            .map(|r| pair(r, "--region"))
+            .transpose()?,
         table_height: args.table_height,
         side,
         shoulder_px: pair(&args.shoulder, "--shoulder")?,
@@ -175,13 +184,11 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
     println!("scene: {}", args.output.display());
     if let Some(p) = &args.preview {
         let model = match &args.model {
-            Some(m) => Some(ActionModel::load(m)?),
-            None => None,
+            Some(m) => ActionModel::load(m)?,
+            None => actrack::model::default_model()?,
         };
-        let lengths = model
-            .as_ref()
-            .map_or([0.29, 0.45], |m| [m.arm_lengths.upper_arm, m.arm_lengths.forearm_hand]);
-        let rest = rest_pose(model.as_ref(), cal.shoulder_above_table);
+        let lengths = [model.arm_lengths.upper_arm, model.arm_lengths.forearm_hand];
+        let rest = rest_pose(Some(&model), cal.shoulder_above_table);
         let mut out = img;
         draw_preview(&mut out, &cal, &corners, &rest, lengths);
         out.save(p).map_err(|e| {
