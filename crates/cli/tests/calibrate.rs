@@ -28,7 +28,12 @@ fn table() -> TableRegion {
 
 /// A camera at `eye` looking at `target` (world = the table's frame of `calibrate`).
 fn camera(eye: Vector3<f64>, target: Vector3<f64>, f: f64, distortion: [f64; 5]) -> Camera {
-    let mut c = Camera::centred("camera0", (640, 480), f, look_at(eye, target, Vector3::z()).unwrap());
+    let mut c = Camera::centred(
+        "camera0",
+        (640, 480),
+        f,
+        look_at(eye, target, Vector3::z()).unwrap(),
+    );
     c.distortion = distortion;
     c
 }
@@ -106,7 +111,10 @@ fn recovers_pose_from_exact_corners_on_20_random_placements() {
         let cal = calibrate(&input(&cam, corners, [su, sv], 0.35)).unwrap();
         let got = &cal.scene.cameras[0];
         let dr = got.r_cw * cam.r_cw.transpose();
-        let angle = ((dr.trace() - 1.0) / 2.0).clamp(-1.0, 1.0).acos().to_degrees();
+        let angle = ((dr.trace() - 1.0) / 2.0)
+            .clamp(-1.0, 1.0)
+            .acos()
+            .to_degrees();
         let dc = (got.centre() - cam.centre()).norm();
         assert!(
             angle < 0.5 && dc < 0.01,
@@ -191,7 +199,9 @@ fn binary_writes_a_scene_and_a_preview() {
     let scene = actrack::Scene::load(&dir.path().join("scene.toml")).unwrap();
     assert!((scene.cameras[0].centre() - cam.centre()).norm() < 0.01);
     assert!((scene.table.placement.origin.z - TABLE_HEIGHT).abs() < 1e-12);
-    let preview = image::open(dir.path().join("preview.png")).unwrap().to_rgb8();
+    let preview = image::open(dir.path().join("preview.png"))
+        .unwrap()
+        .to_rgb8();
     assert_eq!(preview.dimensions(), (640, 480));
     // The outline is drawn: yellow pixels where the grey frame had none.
     let yellow = preview.pixels().filter(|p| p.0 == [255, 230, 0]).count();
@@ -225,7 +235,11 @@ fn binary_writes_a_scene_and_a_preview() {
         ])
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let s2 = actrack::Scene::load(&dir.path().join("scene2.toml")).unwrap();
     assert!((s2.cameras[0].centre() - cam.centre()).norm() < 0.01);
 }
@@ -243,7 +257,10 @@ fn degenerate_input_exits_2_with_a_clear_message() {
     let cam = cli_camera();
     let c = project_all(&cam, &table().corners());
     // Three corners.
-    rejected(&run(dir.path(), &fmt_corners(&c[..3]), &[]), "exactly 4 corners");
+    rejected(
+        &run(dir.path(), &fmt_corners(&c[..3]), &[]),
+        "exactly 4 corners",
+    );
     // Self-crossing: two corners swapped.
     rejected(
         &run(dir.path(), &fmt_corners(&[c[0], c[2], c[1], c[3]]), &[]),
@@ -256,14 +273,22 @@ fn degenerate_input_exits_2_with_a_clear_message() {
     // A table behind the camera: the corners' pixels of a camera turned round (the pinhole
     // projection of points with negative depth).
     let eye = cam.centre();
-    let away = camera(eye, eye + (eye - Vector3::new(0.0, 0.0, TABLE_HEIGHT)), 600.0, [0.0; 5]);
+    let away = camera(
+        eye,
+        eye + (eye - Vector3::new(0.0, 0.0, TABLE_HEIGHT)),
+        600.0,
+        [0.0; 5],
+    );
     let behind: Vec<[f64; 2]> = table()
         .corners()
         .iter()
         .map(|x| {
             let xc = away.to_camera(x);
             assert!(xc.z < 0.0);
-            [away.fx * xc.x / xc.z + away.cx, away.fy * xc.y / xc.z + away.cy]
+            [
+                away.fx * xc.x / xc.z + away.cx,
+                away.fy * xc.y / xc.z + away.cy,
+            ]
         })
         .collect();
     let out = run(dir.path(), &fmt_corners(&behind), &[]);
@@ -276,8 +301,52 @@ fn degenerate_input_exits_2_with_a_clear_message() {
     // A far corner 25 px off: the error is above the threshold.
     let mut off = c.clone();
     off[2][0] += 25.0;
-    rejected(&run(dir.path(), &fmt_corners(&off), &[]), "above the threshold");
+    rejected(
+        &run(dir.path(), &fmt_corners(&off), &[]),
+        "above the threshold",
+    );
     // Not a number.
     rejected(&run(dir.path(), "1,2 3,x 5,6 7,8", &[]), "--corners");
     assert!(!dir.path().join("scene.toml").exists());
+}
+
+/// `scripts/walkthrough` (docs/walkthrough.md step by step on a rendered video with a hidden,
+/// distorting camera; corners and shoulder clicked with 2 px of noise; the shipped default model)
+/// ends within 0.5 cm joint RMSE and 0.5 cm table error of tracking with the true camera (means
+/// over three filter seeds).
+#[test]
+fn walkthrough_matches_the_true_camera() {
+    if Command::new("python3").arg("--version").output().is_err() {
+        eprintln!("skipped: the walkthrough needs python3");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scripts/walkthrough");
+    let out = Command::new("bash")
+        .arg(&script)
+        .arg(dir.path().join("w"))
+        .env("ACTRACK_CLI", BIN)
+        .env("SEEDS", "1 2 3")
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    eprintln!("{stdout}");
+    let w = dir.path().join("w");
+    for f in ["scene.toml", "preview.png", "track.mcap", "track.csv"] {
+        assert!(w.join(f).exists(), "{f} missing");
+    }
+    let c: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(w.join("comparison.json")).unwrap()).unwrap();
+    let get = |k: &str, i: usize| c[k][i].as_f64().unwrap();
+    let d_rmse = get("calibrated", 0) - get("true", 0);
+    let d_table = get("calibrated", 1) - get("true", 1);
+    assert!(
+        d_rmse.abs() <= 0.5 && d_table.abs() <= 0.5,
+        "calibrated − true: joint RMSE {d_rmse:+.2} cm, table error {d_table:+.2} cm"
+    );
 }
