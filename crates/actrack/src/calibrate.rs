@@ -256,7 +256,11 @@ fn opencv_matrix(text: &str, key: &str, path: &Path) -> Result<Option<Vec<f64>>>
             .filter(|s| !s.trim().is_empty())
             .map(|s| {
                 s.trim().parse::<f64>().map_err(|_| {
-                    Error::parse(path, line_no, format!("{key}: `{}` is not a number", s.trim()))
+                    Error::parse(
+                        path,
+                        line_no,
+                        format!("{key}: `{}` is not a number", s.trim()),
+                    )
                 })
             })
             .collect::<Result<Vec<_>>>()?;
@@ -272,20 +276,19 @@ fn parse_opencv_yaml(text: &str, path: &Path) -> Result<RawIntrinsics> {
         Some(d) => d,
         None => opencv_matrix(text, "dist_coeffs", path)?.unwrap_or_default(),
     };
-    let dim = |key: &str| -> Result<Option<u32>> {
-        for (i, line) in text.lines().enumerate() {
-            if let Some(rest) = line.trim_start().strip_prefix(key)
-                && let Some(v) = rest.trim_start().strip_prefix(':')
-            {
-                return v
-                    .trim()
-                    .parse::<u32>()
-                    .map(Some)
-                    .map_err(|_| Error::parse(path, i + 1, format!("{key}: expected an integer")));
+    let dim =
+        |key: &str| -> Result<Option<u32>> {
+            for (i, line) in text.lines().enumerate() {
+                if let Some(rest) = line.trim_start().strip_prefix(key)
+                    && let Some(v) = rest.trim_start().strip_prefix(':')
+                {
+                    return v.trim().parse::<u32>().map(Some).map_err(|_| {
+                        Error::parse(path, i + 1, format!("{key}: expected an integer"))
+                    });
+                }
             }
-        }
-        Ok(None)
-    };
+            Ok(None)
+        };
     Ok((k, d, dim("image_width")?, dim("image_height")?))
 }
 
@@ -332,9 +335,10 @@ pub fn load_corners(path: &Path) -> Result<Vec<[f64; 2]>> {
                         .then(|| Some([a[0].as_f64()?, a[1].as_f64()?]))
                         .flatten()
                 });
-                p.filter(|p| p.iter().all(|x| x.is_finite())).ok_or_else(|| {
-                    Error::invalid(path, format!("corner {i}: expected [u, v] in pixels"))
-                })
+                p.filter(|p| p.iter().all(|x| x.is_finite()))
+                    .ok_or_else(|| {
+                        Error::invalid(path, format!("corner {i}: expected [u, v] in pixels"))
+                    })
             })
             .collect();
     }
@@ -475,7 +479,12 @@ pub fn check_quadrilateral(c: &[[f64; 2]]) -> Result<()> {
         ));
     }
     let turns: Vec<f64> = (0..4)
-        .map(|i| cross2(sub2(c[(i + 1) % 4], c[i]), sub2(c[(i + 2) % 4], c[(i + 1) % 4])))
+        .map(|i| {
+            cross2(
+                sub2(c[(i + 1) % 4], c[i]),
+                sub2(c[(i + 2) % 4], c[(i + 1) % 4]),
+            )
+        })
         .collect();
     if !(turns.iter().all(|&t| t > 0.0) || turns.iter().all(|&t| t < 0.0)) {
         return Err(Error::Config(
@@ -538,7 +547,11 @@ fn refine(
     for _ in 0..100 {
         let mut jac = vec![Vector6::zeros(); n];
         for k in 0..6 {
-            let h = if k < 3 { 1e-7 } else { 1e-7 * t.norm().max(1.0) };
+            let h = if k < 3 {
+                1e-7
+            } else {
+                1e-7 * t.norm().max(1.0)
+            };
             let mut d = Vector6::zeros();
             d[k] = h;
             let (rp, tp) = apply(&r, &t, &d);
@@ -700,7 +713,7 @@ pub fn calibrate(input: &CalibrationInput) -> Result<Calibration> {
     let errs: [f64; 4] = std::array::from_fn(|i| res[2 * i].hypot(res[2 * i + 1]));
     let rms = (errs.iter().map(|e| e * e).sum::<f64>() / 4.0).sqrt();
     let max = errs.iter().copied().fold(0.0, f64::max);
-    if !(max <= input.max_error_px) {
+    if max.is_nan() || max > input.max_error_px {
         return Err(Error::Config(format!(
             "corner reprojection error {max:.1} px (rms {rms:.1} px) is above the threshold \
              {:.1} px: check the corners, the table size and the intrinsics",
@@ -910,6 +923,7 @@ mod tests {
     }
 
     #[test]
+    #[allow(clippy::float_cmp)] // the numbers are parsed from exact decimal text
     fn opencv_yaml_and_json_intrinsics() {
         let dir = tempfile::tempdir().unwrap();
         let y = dir.path().join("cam.yml");
@@ -932,6 +946,35 @@ mod tests {
         )
         .unwrap();
         let i = Intrinsics::load(&j).unwrap();
-        assert_eq!((i.fx, i.cx, i.distortion[0], i.size), (500.0, 160.0, 0.1, None));
+        assert_eq!(
+            (i.fx, i.cx, i.distortion[0], i.size),
+            (500.0, 160.0, 0.1, None)
+        );
+    }
+
+    #[test]
+    fn left_arm_scene_mirrors_the_actor_frame() {
+        let right = crate::scene::default_scene(320, 240);
+        let left = Scene {
+            side: Side::Left,
+            ..right.clone()
+        };
+        let pose = [0.0, 0.0, 0.0, 0.1, 0.05, -0.25, 0.3, 0.35, -0.3];
+        let (wr, wl) = (right.pose_to_world(&pose), left.pose_to_world(&pose));
+        for j in 0..3 {
+            // The actor's heading is 0: world x about the shoulder is mirrored, y and z agree.
+            let o = right.actor.origin;
+            assert!((wr[3 * j] - o.x + (wl[3 * j] - o.x)).abs() < 1e-12);
+            assert!((wr[3 * j + 1] - wl[3 * j + 1]).abs() < 1e-12);
+            assert!((wr[3 * j + 2] - wl[3 * j + 2]).abs() < 1e-12);
+        }
+        let back = left.pose_to_actor(&wl);
+        assert!(back.iter().zip(&pose).all(|(a, b)| (a - b).abs() < 1e-12));
+        let t = left.theta_to_world([0.1, 0.4]);
+        assert!((t.x - right.actor.origin.x + 0.1).abs() < 1e-12);
+        let (cl, hl) = left.theta_region();
+        let (cr, hr) = right.theta_region();
+        assert!((cl[0] + cr[0]).abs() < 1e-12 && (cl[1] - cr[1]).abs() < 1e-12);
+        assert!((hl[0] - hr[0]).abs() < 1e-12 && (hl[1] - hr[1]).abs() < 1e-12);
     }
 }

@@ -4,6 +4,8 @@
 //! camera's projection, the renderer's camera (what the tracker scores and synth draws with), its
 //! inverse, and that a scene file with k1…k3 loads into the same camera.
 #![allow(clippy::unwrap_used)]
+// Distortion coefficients written to TOML and read back are compared bit for bit.
+#![allow(clippy::float_cmp)]
 
 use std::path::Path;
 
@@ -79,7 +81,10 @@ fn undistortion_matches_opencv_undistort_points() {
         let und = nums(&c["undistorted"]);
         for j in 0..px.len() / 2 {
             let (x, y) = rcam
-                .undistort((px[2 * j] - cam.cx) / cam.fx, (px[2 * j + 1] - cam.cy) / cam.fy)
+                .undistort(
+                    (px[2 * j] - cam.cx) / cam.fx,
+                    (px[2 * j + 1] - cam.cy) / cam.fy,
+                )
                 .unwrap();
             let e = (x - und[2 * j]).hypot(y - und[2 * j + 1]);
             assert!(e < 1e-9, "case {i} point {j}: {e}");

@@ -3,6 +3,7 @@
 //! rejected by the binary with exit code 2 and a message saying what is wrong.
 #![allow(clippy::unwrap_used)]
 
+use std::fmt::Write as _;
 use std::path::Path;
 use std::process::Command;
 
@@ -207,11 +208,10 @@ fn binary_writes_a_scene_and_a_preview() {
     let yellow = preview.pixels().filter(|p| p.0 == [255, 230, 0]).count();
     assert!(yellow > 500, "{yellow} outline pixels");
     // A corners file (CSV with a header) gives the same scene.
-    let csv = "u,v\n".to_string()
-        + &corners
-            .iter()
-            .map(|p| format!("{},{}\n", p[0], p[1]))
-            .collect::<String>();
+    let mut csv = "u,v\n".to_string();
+    for p in &corners {
+        writeln!(csv, "{},{}", p[0], p[1]).unwrap();
+    }
     std::fs::write(dir.path().join("corners.csv"), csv).unwrap();
     let mut c = Command::new(BIN);
     let out = c

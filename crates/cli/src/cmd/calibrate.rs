@@ -97,13 +97,22 @@ fn pair(s: &str, what: &str) -> Result<[f64; 2], super::UsageError> {
 pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
     let usage = |m: String| -> anyhow::Error { super::UsageError(m).into() };
     let img = image::open(&args.image)
-        .map_err(|e| usage(format!("{}: cannot read the image: {e}", args.image.display())))?
+        .map_err(|e| {
+            usage(format!(
+                "{}: cannot read the image: {e}",
+                args.image.display()
+            ))
+        })?
         .to_rgb8();
     let (width, height) = img.dimensions();
     let corners = match (&args.corners, &args.corners_file) {
         (Some(s), None) => parse_corners(s).map_err(|e| usage(format!("--corners: {e}")))?,
         (None, Some(p)) => load_corners(p)?,
-        _ => return Err(usage("give the corners: --corners or --corners-file".into())),
+        _ => {
+            return Err(usage(
+                "give the corners: --corners or --corners-file".into(),
+            ));
+        }
     };
     let intrinsics = match (&args.intrinsics, args.hfov, args.focal_px) {
         (Some(p), None, None) => Intrinsics::load(p)?.for_size(width, height)?,
@@ -191,9 +200,8 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
         let rest = rest_pose(Some(&model), cal.shoulder_above_table);
         let mut out = img;
         draw_preview(&mut out, &cal, &corners, &rest, lengths);
-        out.save(p).map_err(|e| {
-            actrack::Error::write(p, std::io::Error::other(e.to_string()))
-        })?;
+        out.save(p)
+            .map_err(|e| actrack::Error::write(p, std::io::Error::other(e.to_string())))?;
         println!("preview: {}", p.display());
     }
     Ok(ExitCode::SUCCESS)

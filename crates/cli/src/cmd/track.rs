@@ -81,17 +81,16 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
     if let Some(n) = args.threads {
         actrack::pipeline::set_threads(n)?;
     }
-    let model = match &args.model {
-        Some(p) => ActionModel::load(p)?,
-        None => {
-            let m = actrack::model::default_model()?;
-            eprintln!(
-                "model: the built-in {} (actions {})",
-                actrack::model::DEFAULT_MODEL_NAME,
-                m.action_names().join(", ")
-            );
-            m
-        }
+    let model = if let Some(p) = &args.model {
+        ActionModel::load(p)?
+    } else {
+        let m = actrack::model::default_model()?;
+        eprintln!(
+            "model: the built-in {} (actions {})",
+            actrack::model::DEFAULT_MODEL_NAME,
+            m.action_names().join(", ")
+        );
+        m
     };
     let scene = Scene::load(&args.scene)?;
     let mut source = FrameSource::open(
