@@ -583,14 +583,13 @@ impl Scene {
     /// bounding the table region (exact when the actor's heading equals the table's).
     pub fn theta_region(&self) -> ([f64; 2], [f64; 2]) {
         let c = self.actor.from_world(&self.table.placement.origin);
-        let c = Vector3::new(self.mirror() * c.x, c.y, c.z);
         let corners = self.table.corners().map(|p| self.actor.from_world(&p));
         let mut h = [0.0_f64; 2];
         for p in &corners {
             h[0] = h[0].max((p.x - c.x).abs());
             h[1] = h[1].max((p.y - c.y).abs());
         }
-        ([c.x, c.y], h)
+        ([self.mirror() * c.x, c.y], h)
     }
 
     /// The world point on the table surface of θ (actor-frame x, y).
