@@ -6,6 +6,7 @@
 //! `actrack-phmm`, `actrack-render` and `actrack-pf`.
 
 pub mod bench;
+pub mod calibrate;
 pub mod config;
 pub mod demo;
 pub mod error;

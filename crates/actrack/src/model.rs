@@ -21,6 +21,18 @@ pub const FORMAT: &str = "actrack-model";
 /// The model file version this build reads and writes.
 pub const VERSION: u32 = 1;
 
+/// The file name of the default model shipped in `models/` (reach and drink, every UE-ADL subject).
+pub const DEFAULT_MODEL_NAME: &str = "reach-drink.v1.actrack.json";
+
+/// The default model's file, built into the library.
+const DEFAULT_MODEL_JSON: &str = include_str!("../../../models/reach-drink.v1.actrack.json");
+
+/// The default model shipped in `models/` ([`DEFAULT_MODEL_NAME`]), built into the library so
+/// that it needs no file at run time.
+pub fn default_model() -> Result<ActionModel> {
+    ActionModel::from_json(Path::new(DEFAULT_MODEL_NAME), DEFAULT_MODEL_JSON)
+}
+
 /// One action: its parametric HMM and what it was trained on.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Action {

@@ -27,7 +27,7 @@
 //! [actor]
 //! origin = [0.0, 0.0, 1.1]       # world position of the acting shoulder at rest
 //! yaw_deg = 0.0                  # heading of the actor frame (default: the table's)
-//! arm = "right"                  # acting arm: "right" or "left"
+//! arm = "right"                  # acting arm: "right" or "left" (left: the actor frame's x is mirrored)
 //!
 //! [arm]                          # optional rendering geometry (defaults of SPEC §4.2)
 //! upper_arm_radii = [0.05, 0.04]
@@ -43,7 +43,8 @@
 //! ```
 //!
 //! The actor frame has its origin at `actor.origin` and the axes of the heading: x =
-//! (cos ψ, sin ψ, 0), y = (−sin ψ, cos ψ, 0) (across the table, away from the actor), z up.
+//! (cos ψ, sin ψ, 0), y = (−sin ψ, cos ψ, 0) (across the table, away from the actor), z up; for a
+//! left arm x is negated (a mirror image), so right-arm models track the left arm.
 
 use std::path::Path;
 
@@ -572,6 +573,13 @@ impl Scene {
         toml::to_string_pretty(&raw).unwrap_or_default()
     }
 
+    /// −1 for a left arm, else 1: the sign of the actor frame's x axis. A left arm's actor frame
+    /// is mirrored (x points to the actor's left), so models of the right arm (and left arms
+    /// mirrored onto it in training) track either arm.
+    pub fn mirror(&self) -> f64 {
+        if self.side == Side::Left { -1.0 } else { 1.0 }
+    }
+
     /// The θ prior region in the actor frame: (centre, half-extents) of the axis-aligned box
     /// bounding the table region (exact when the actor's heading equals the table's).
     pub fn theta_region(&self) -> ([f64; 2], [f64; 2]) {
@@ -582,13 +590,14 @@ impl Scene {
             h[0] = h[0].max((p.x - c.x).abs());
             h[1] = h[1].max((p.y - c.y).abs());
         }
-        ([c.x, c.y], h)
+        ([self.mirror() * c.x, c.y], h)
     }
 
     /// The world point on the table surface of θ (actor-frame x, y).
     pub fn theta_to_world(&self, theta: [f64; 2]) -> Vector3<f64> {
         let z = self.table.placement.origin.z - self.actor.origin.z;
-        self.actor.to_world(&Vector3::new(theta[0], theta[1], z))
+        self.actor
+            .to_world(&Vector3::new(self.mirror() * theta[0], theta[1], z))
     }
 
     /// The table surface's height in the actor frame (metres; negative: below the shoulder),
@@ -601,9 +610,11 @@ impl Scene {
     pub fn pose_to_world(&self, pose: &[f64; 9]) -> [f64; 9] {
         let mut out = [0.0; 9];
         for j in 0..3 {
-            let w =
-                self.actor
-                    .to_world(&Vector3::new(pose[3 * j], pose[3 * j + 1], pose[3 * j + 2]));
+            let w = self.actor.to_world(&Vector3::new(
+                self.mirror() * pose[3 * j],
+                pose[3 * j + 1],
+                pose[3 * j + 2],
+            ));
             out[3 * j..3 * j + 3].copy_from_slice(w.as_slice());
         }
         out
@@ -616,7 +627,7 @@ impl Scene {
             let a =
                 self.actor
                     .from_world(&Vector3::new(pose[3 * j], pose[3 * j + 1], pose[3 * j + 2]));
-            out[3 * j..3 * j + 3].copy_from_slice(a.as_slice());
+            out[3 * j..3 * j + 3].copy_from_slice(&[self.mirror() * a.x, a.y, a.z]);
         }
         out
     }

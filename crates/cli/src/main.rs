@@ -35,6 +35,9 @@ enum Command {
     Track(cmd::track::Args),
     /// Compare a track with ground truth (SPEC §5.4 metrics, plots).
     Eval(cmd::eval::Args),
+    /// Calibrate a scene from one frame: the table's corners in pixels, its size, the camera's
+    /// intrinsics and the acting shoulder → scene.toml, reprojection error, preview image.
+    Calibrate(cmd::calibrate::Args),
     /// Time the tracker on a synthetic sequence: per-frame median/p95, stages, peak memory.
     Bench(cmd::bench::Args),
 }
@@ -49,6 +52,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Track(a) => cmd::track::run(&a),
         Command::Eval(a) => cmd::eval::run(&a),
         Command::Bench(a) => cmd::bench::run(&a),
+        Command::Calibrate(a) => cmd::calibrate::run(&a),
     }
 }
 

@@ -1,6 +1,7 @@
 //! One module per command.
 
 pub mod bench;
+pub mod calibrate;
 pub mod classify;
 pub mod config;
 pub mod demo;

@@ -1,4 +1,4 @@
-//! `actrack-cli track --model M --scene S --input IN -o track.mcap [--csv track.csv] …`.
+//! `actrack-cli track [--model M] --scene S --input IN -o track.mcap [--csv track.csv] …`.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -53,9 +53,10 @@ pub fn interrupted_code() -> ExitCode {
 /// Options of `track`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// The action model file (`*.actrack.json`).
+    /// The action model file (`*.actrack.json`; default: the shipped reach-and-drink model,
+    /// `models/reach-drink.v1.actrack.json`, built in).
     #[arg(long, short = 'm')]
-    pub model: PathBuf,
+    pub model: Option<PathBuf>,
     /// The scene file (TOML: cameras, table, actor). The video is from its first camera.
     #[arg(long, short = 's')]
     pub scene: PathBuf,
@@ -105,7 +106,17 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
     if let Some(n) = args.threads {
         actrack::pipeline::set_threads(n)?;
     }
-    let model = ActionModel::load(&args.model)?;
+    let model = if let Some(p) = &args.model {
+        ActionModel::load(p)?
+    } else {
+        let m = actrack::model::default_model()?;
+        eprintln!(
+            "model: the built-in {} (actions {})",
+            actrack::model::DEFAULT_MODEL_NAME,
+            m.action_names().join(", ")
+        );
+        m
+    };
     let scene = Scene::load(&args.scene)?;
     if scene.cameras.len() != 1 {
         return Err(actrack::Error::invalid(

@@ -1,0 +1,114 @@
+//! The scene camera's lens distortion against OpenCV: `cv2.projectPoints` pixels and
+//! `cv2.undistortPoints` normalised coordinates of five cameras (barrel, pincushion, tangential,
+//! a strong wide-angle lens, none), written by `scripts/make-opencv-fixtures`. Checks the scene
+//! camera's projection, the renderer's camera (what the tracker scores and synth draws with), its
+//! inverse, and that a scene file with k1…k3 loads into the same camera.
+#![allow(clippy::unwrap_used)]
+// Distortion coefficients written to TOML and read back are compared bit for bit.
+#![allow(clippy::float_cmp)]
+
+use std::path::Path;
+
+use actrack::scene::{Camera, Scene, render_camera};
+use nalgebra::{Matrix3, Rotation3, Vector3};
+use serde_json::Value;
+
+fn nums(v: &Value) -> Vec<f64> {
+    match v {
+        Value::Array(a) => a.iter().flat_map(nums).collect(),
+        Value::Number(n) => vec![n.as_f64().unwrap()],
+        _ => panic!("not a number: {v}"),
+    }
+}
+
+fn cases() -> Vec<Value> {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/opencv_project_points.json");
+    let v: Value = serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap();
+    v["cases"].as_array().unwrap().clone()
+}
+
+fn camera(c: &Value) -> Camera {
+    let k = nums(&c["camera_matrix"]);
+    let d = nums(&c["dist_coeffs"]);
+    let r = nums(&c["rotation"]);
+    let t = nums(&c["tvec"]);
+    Camera {
+        name: "cv".into(),
+        width: c["width"].as_u64().unwrap() as u32,
+        height: c["height"].as_u64().unwrap() as u32,
+        fx: k[0],
+        fy: k[4],
+        cx: k[2],
+        cy: k[5],
+        distortion: [d[0], d[1], d[2], d[3], d[4]],
+        r_cw: Matrix3::from_row_slice(&r),
+        t_cw: Vector3::new(t[0], t[1], t[2]),
+    }
+}
+
+#[test]
+fn projection_matches_opencv_project_points() {
+    let mut worst: f64 = 0.0;
+    for (i, c) in cases().iter().enumerate() {
+        let cam = camera(c);
+        let rcam = render_camera(&cam);
+        // OpenCV's Rodrigues and nalgebra's rotation vector agree.
+        let rv = nums(&c["rvec"]);
+        let rn = Rotation3::new(Vector3::new(rv[0], rv[1], rv[2]));
+        assert!((rn.matrix() - cam.r_cw).abs().max() < 1e-12, "case {i}");
+        let pts = nums(&c["points"]);
+        let px = nums(&c["pixels"]);
+        for j in 0..pts.len() / 3 {
+            let x = Vector3::new(pts[3 * j], pts[3 * j + 1], pts[3 * j + 2]);
+            let (u, v) = cam.project(&x).unwrap();
+            let r = rcam.project(&x).unwrap();
+            let e = (u - px[2 * j]).hypot(v - px[2 * j + 1]);
+            let er = (r.x - px[2 * j]).hypot(r.y - px[2 * j + 1]);
+            assert!(e < 1e-6 && er < 1e-6, "case {i} point {j}: {e} / {er} px");
+            worst = worst.max(e).max(er);
+        }
+    }
+    eprintln!("largest difference from cv2.projectPoints: {worst:.2e} px");
+}
+
+#[test]
+fn undistortion_matches_opencv_undistort_points() {
+    let mut worst: f64 = 0.0;
+    for (i, c) in cases().iter().enumerate() {
+        let cam = camera(c);
+        let rcam = render_camera(&cam);
+        let px = nums(&c["pixels"]);
+        let und = nums(&c["undistorted"]);
+        for j in 0..px.len() / 2 {
+            let (x, y) = rcam
+                .undistort(
+                    (px[2 * j] - cam.cx) / cam.fx,
+                    (px[2 * j + 1] - cam.cy) / cam.fy,
+                )
+                .unwrap();
+            let e = (x - und[2 * j]).hypot(y - und[2 * j + 1]);
+            assert!(e < 1e-9, "case {i} point {j}: {e}");
+            worst = worst.max(e);
+        }
+    }
+    eprintln!("largest difference from cv2.undistortPoints: {worst:.2e} (normalised)");
+}
+
+#[test]
+fn scene_file_distortion_round_trips() {
+    for c in cases() {
+        let cam = camera(&c);
+        let scene = Scene {
+            cameras: vec![cam.clone()],
+            ..actrack::scene::default_scene(cam.width, cam.height)
+        };
+        let back = Scene::parse(&scene.to_toml_string(), Path::new("scene.toml")).unwrap();
+        assert_eq!(back.cameras[0].distortion, cam.distortion);
+        let px = nums(&c["pixels"]);
+        let pts = nums(&c["points"]);
+        let (u, v) = back.cameras[0]
+            .project(&Vector3::new(pts[0], pts[1], pts[2]))
+            .unwrap();
+        assert!((u - px[0]).abs() < 1e-6 && (v - px[1]).abs() < 1e-6);
+    }
+}
