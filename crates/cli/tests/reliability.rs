@@ -342,8 +342,8 @@ fn set_camera(t: &mut toml::Table, eye: [f64; 3]) {
 
 #[test]
 fn implausible_scenes_are_refused_naming_the_key() {
-    let f = fixture();
     type Edit = Box<dyn FnOnce(&mut toml::Table)>;
+    let f = fixture();
     let cases: Vec<(&str, Edit, &[&str])> = vec![
         (
             "far_camera.toml",

@@ -59,6 +59,10 @@ pub struct ThetaEstimate {
 /// Per-model precomputation: `V_i = L_i⁻¹ W_i` (d × p, column-major in a flat Vec).
 /// One θ-EM run: (θ internal, log-likelihood, objective, iterations, history).
 type RunResult = (Vec<f64>, f64, f64, usize, Vec<f64>);
+/// A Gaussian prior on the internal θ: its mean and covariance.
+type InternalPrior = (DVector<f64>, DMatrix<f64>);
+/// A box on the internal θ: lower and upper bounds per component.
+type InternalBox = (Vec<f64>, Vec<f64>);
 
 struct ThetaKernel {
     v: Vec<f64>,
@@ -220,10 +224,7 @@ impl Phmm {
         t_len: usize,
         kernel: &ThetaKernel,
         mut theta: Vec<f64>,
-        (prior, bounds): (
-            Option<&(DVector<f64>, DMatrix<f64>)>,
-            Option<&(Vec<f64>, Vec<f64>)>,
-        ),
+        (prior, bounds): (Option<&InternalPrior>, Option<&InternalBox>),
         opts: &ThetaEmOptions,
     ) -> Result<RunResult, PhmmError> {
         let (n, d, p) = (self.n, self.d, self.p);
