@@ -37,6 +37,23 @@ pub fn parse_c3d(path: &Path, bytes: &[u8], wanted: Option<&[String]>) -> Result
             "truncated C3D file (no parameter section)",
         ));
     }
+    // The data section must start after the parameter section; c3dio underflows on a data start
+    // block of 0 or 1. Header words are little-endian except on MIPS (processor byte 86).
+    let processor = bytes.get((param_block - 1) * 512 + 3).copied();
+    let data_block = if processor == Some(86) {
+        u16::from_be_bytes([bytes[16], bytes[17]])
+    } else {
+        u16::from_le_bytes([bytes[16], bytes[17]])
+    };
+    if usize::from(data_block) <= param_block {
+        return Err(Error::invalid(
+            path,
+            format!(
+                "malformed C3D header: the data section (block {data_block}) must start after \
+                 the parameter section (block {param_block})"
+            ),
+        ));
+    }
     let owned = bytes.to_vec();
     let parsed = std::panic::catch_unwind(move || {
         c3dio::C3d::from_bytes(&owned).map_err(|e| format!("{e:?}"))
@@ -458,6 +475,22 @@ mod tests {
             // The importer's content sniffing gives the same error.
             let e = crate::mocap::trial::read_source(&path, &labels[..2]);
             assert!(e.is_err(), "{cut}: read_source accepted it");
+        }
+    }
+
+    /// Fuzzing found c3dio underflowing on a data start block at or before the parameters.
+    #[test]
+    fn data_section_before_parameters_is_an_error() {
+        let labels = vec!["M0".to_string()];
+        let frames = vec![vec![Some([0.0_f32, 1.0, 2.0])]; 3];
+        let good = write_c3d(&labels, "mm", 100.0, 1, &frames);
+        for block in [0_u16, 1, 2] {
+            let mut bytes = good.clone();
+            bytes[16..18].copy_from_slice(&block.to_le_bytes());
+            let msg = super::parse_c3d(Path::new("bad.c3d"), &bytes, None)
+                .expect_err("accepted")
+                .to_string();
+            assert!(msg.contains("bad.c3d"), "{block}: {msg}");
         }
     }
 }

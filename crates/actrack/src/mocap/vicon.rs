@@ -88,6 +88,19 @@ pub fn parse_vicon_csv(path: &Path, text: &str, wanted: Option<&[String]>) -> Re
                 ),
             ));
         }
+        let expected = 2 + 3 * names.len();
+        if c != expected {
+            return Err(Error::parse(
+                path,
+                names_ln,
+                format!(
+                    "marker name `{f}` in column {} but column {} has none (every marker's \
+                     three columns carry its name in the first)",
+                    c + 1,
+                    expected + 1
+                ),
+            ));
+        }
         let name = f.rsplit(':').next().unwrap_or(f).to_string();
         names.push(name);
         columns.push(c);
@@ -337,6 +350,19 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("x.csv:3") && e.contains("`Q`"), "{e}");
+    }
+
+    /// Fuzzing found a marker name past an unnamed marker's columns indexing beyond the row.
+    #[test]
+    fn marker_name_after_a_gap_is_an_error() {
+        let gap = sample().replace(",,S:A,,,S:B,,", ",,,,,S:B,,");
+        let e = parse_vicon_csv(Path::new("x.csv"), &gap, None)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("x.csv:3:") && e.contains("column 6") && e.contains("column 3"),
+            "{e}"
+        );
     }
 
     #[test]
