@@ -91,6 +91,14 @@ impl PyActionModel {
         Ok(PyActionModel { inner })
     }
 
+    /// The shipped default model (reach and drink, trained on every UE-ADL subject), the one
+    /// `actrack-cli track` uses without `--model`.
+    #[classmethod]
+    fn load_default(_cls: &Bound<'_, PyType>) -> PyResult<Self> {
+        let inner = actrack::model::default_model().map_err(|e| actrack_error(&e))?;
+        Ok(PyActionModel { inner })
+    }
+
     /// Read a model file (`*.actrack.json`).
     #[classmethod]
     fn load(_cls: &Bound<'_, PyType>, path: PathBuf) -> PyResult<Self> {
