@@ -398,7 +398,8 @@ impl Y4mReader {
         let (mut w, mut h, mut fps, mut chroma, mut full) =
             (0usize, 0usize, None, Chroma::C420, false);
         for tok in it {
-            let (k, v) = tok.split_at(tok.len().min(1));
+            // The key is the first character, which need not be one byte.
+            let (k, v) = tok.split_at(tok.chars().next().map_or(0, char::len_utf8));
             match k {
                 "W" => w = v.parse().unwrap_or(0),
                 "H" => h = v.parse().unwrap_or(0),
@@ -704,5 +705,15 @@ mod tests {
         assert_eq!(img.get_pixel(0, 0).0, [255, 255, 255]);
         assert_eq!(img.get_pixel(0, 1).0, [0, 0, 0]);
         assert!(r.read_frame().unwrap().is_none());
+    }
+
+    /// Fuzzing found a header token starting with a multi-byte character splitting inside it.
+    #[test]
+    fn y4m_header_token_with_multibyte_key() {
+        let data = "YUV4MPEG2 W2 H2 é30 Xü F30:1\nFRAME\n\u{10}\u{10}\u{10}\u{10}\u{7f}\u{7f}"
+            .as_bytes()
+            .to_vec();
+        let mut r = Y4mReader::new(Box::new(std::io::Cursor::new(data)), Path::new("x")).unwrap();
+        assert!(r.read_frame().unwrap().is_some());
     }
 }
