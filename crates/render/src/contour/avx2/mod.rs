@@ -281,9 +281,12 @@ impl pulp::NullaryFnOnce for Nearest<'_> {
     }
 }
 
-/// Samples `part` into the f32 loop.
-#[allow(clippy::inline_always)]
-#[inline(always)]
+/// Samples `part` into the f32 loop, with AVX2 (by pulp).
+///
+/// Out of line: each of the loop's specialisations (inside the image or not, occluders,
+/// window length) is a function of its own rather than one more copy in [`Nearest`]'s body,
+/// which keeps the kernel's code and its compile time linear in the number of specialisations.
+#[inline(never)]
 fn stream<const INSIDE: bool, const NOCC: usize, const W: usize>(
     s: V3,
     part: &Prepared,
@@ -291,14 +294,41 @@ fn stream<const INSIDE: bool, const NOCC: usize, const W: usize>(
     pl: &PartLoop<'_, '_, W>,
     acc: &mut Acc<'_>,
 ) {
-    let mut st = Stream::<INSIDE, NOCC, W> {
+    s.vectorize(StreamCall::<INSIDE, NOCC, W> {
         simd: s,
+        part,
         a,
         pl,
         acc,
-        k: 0,
-    };
-    part.sample_outline(pl.ctx.step, &mut st);
+    });
+}
+
+/// The body of [`stream`].
+struct StreamCall<'p, 'l, 'a, 'w, 'b, 'c, const INSIDE: bool, const NOCC: usize, const W: usize> {
+    simd: V3,
+    part: &'p Prepared,
+    a: [f64; 2],
+    pl: &'l PartLoop<'a, 'w, W>,
+    acc: &'b mut Acc<'c>,
+}
+
+impl<const INSIDE: bool, const NOCC: usize, const W: usize> pulp::NullaryFnOnce
+    for StreamCall<'_, '_, '_, '_, '_, '_, INSIDE, NOCC, W>
+{
+    type Output = ();
+
+    #[allow(clippy::inline_always)]
+    #[inline(always)]
+    fn call(self) {
+        let mut st = Stream::<INSIDE, NOCC, W> {
+            simd: self.simd,
+            a: self.a,
+            pl: self.pl,
+            acc: self.acc,
+            k: 0,
+        };
+        self.part.sample_outline(self.pl.ctx.step, &mut st);
+    }
 }
 
 /// The f64 occluders of the context's part (as the portable sampler has them).
