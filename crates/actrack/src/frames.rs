@@ -5,10 +5,17 @@
 //! Every frame comes out as RGB8. Errors name the source and the frame (0-based index and, for
 //! image directories, the file). With `skip_bad_frames`, corrupt frames and frames of another
 //! size are skipped and reported by [`FrameSource::skipped`].
+//!
+//! Live sources (a camera device such as `/dev/video0`, always live, or any stream opened with
+//! [`FrameOptions::live`]) are read by a thread that keeps only the newest frame: a tracker slower
+//! than the camera drops frames instead of falling behind, and [`LiveStats`] counts them.
 
 use std::io::{BufRead, BufReader, Read, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, Condvar, Mutex};
+use std::time::Duration;
 
 use image::RgbImage;
 
@@ -35,11 +42,155 @@ pub struct FrameOptions {
     pub fps: Option<f64>,
     /// Skip corrupt frames and frames of another size instead of failing.
     pub skip_bad_frames: bool,
+    /// Read the stream live: keep only the newest frame and drop the ones the tracker has no
+    /// time for (camera devices are always live; image directories cannot be).
+    pub live: bool,
 }
 
 enum Inner {
     Dir { files: Vec<PathBuf>, next: usize },
     Y4m(Box<Y4mReader>, Option<Child>),
+    Live(Live),
+}
+
+/// Counters of a live source, shared with whoever displays them while the tracker runs.
+#[derive(Debug, Default)]
+pub struct LiveStats {
+    received: AtomicUsize,
+    dropped: AtomicUsize,
+}
+
+impl LiveStats {
+    /// Frames that arrived from the source so far.
+    pub fn received(&self) -> usize {
+        self.received.load(Ordering::Relaxed)
+    }
+
+    /// Frames dropped so far: a newer frame arrived before the tracker took the previous one.
+    pub fn dropped(&self) -> usize {
+        self.dropped.load(Ordering::Relaxed)
+    }
+}
+
+/// What the reader thread of a live source hands over.
+#[derive(Default)]
+struct LiveSlot {
+    /// The newest frame not yet taken (index in the source, pixels).
+    newest: Option<(usize, RgbImage)>,
+    /// The stream ended: cleanly (`Ok`) or with the message of a broken frame.
+    end: Option<std::result::Result<(), String>>,
+}
+
+#[derive(Default)]
+struct LiveShared {
+    slot: Mutex<LiveSlot>,
+    ready: Condvar,
+    stats: Arc<LiveStats>,
+}
+
+/// A y4m stream read by its own thread, newest frame wins.
+struct Live {
+    shared: Arc<LiveShared>,
+    child: Option<Child>,
+    taken: usize,
+}
+
+impl Live {
+    fn start(mut reader: Y4mReader, child: Option<Child>) -> Self {
+        let shared = Arc::new(LiveShared::default());
+        let theirs = Arc::clone(&shared);
+        // The thread ends at the end of the stream, or when the decoder is killed on drop; a
+        // thread blocked on stdin ends with the process.
+        std::thread::spawn(move || {
+            loop {
+                let index = reader.frames_read;
+                let got = reader.read_frame();
+                let Ok(mut slot) = theirs.slot.lock() else {
+                    return;
+                };
+                match got {
+                    Ok(Some(img)) => {
+                        theirs.stats.received.fetch_add(1, Ordering::Relaxed);
+                        if slot.newest.replace((index, img)).is_some() {
+                            theirs.stats.dropped.fetch_add(1, Ordering::Relaxed);
+                        }
+                    }
+                    Ok(None) => slot.end = Some(Ok(())),
+                    Err(msg) => slot.end = Some(Err(format!("frame {index}: {msg}"))),
+                }
+                let done = slot.end.is_some();
+                drop(slot);
+                theirs.ready.notify_one();
+                if done {
+                    return;
+                }
+            }
+        });
+        Self {
+            shared,
+            child,
+            taken: 0,
+        }
+    }
+
+    /// The newest frame, waiting for one; `None` at the end of the stream.
+    fn next(&mut self, name: &Path) -> Result<Option<(usize, RgbImage)>> {
+        let poisoned = || Error::invalid(name, "the frame reader thread failed");
+        let mut slot = self.shared.slot.lock().map_err(|_| poisoned())?;
+        loop {
+            if let Some(f) = slot.newest.take() {
+                self.taken += 1;
+                return Ok(Some(f));
+            }
+            match slot.end.take() {
+                Some(Ok(())) => {
+                    drop(slot);
+                    if let Some(c) = self.child.as_mut() {
+                        finish_ffmpeg(c, name, self.shared.stats.received())?;
+                    }
+                    if self.taken == 0 {
+                        return Err(Error::invalid(
+                            name,
+                            "no frames: the y4m stream ends after its header",
+                        ));
+                    }
+                    return Ok(None);
+                }
+                Some(Err(msg)) => {
+                    drop(slot);
+                    if let Some(c) = self.child.as_mut() {
+                        let _ = c.kill();
+                        let _ = c.wait();
+                    }
+                    return Err(Error::invalid(name, msg));
+                }
+                None => {}
+            }
+            slot = self
+                .shared
+                .ready
+                .wait_timeout(slot, Duration::from_millis(500))
+                .map_err(|_| poisoned())?
+                .0;
+        }
+    }
+}
+
+impl Drop for Live {
+    fn drop(&mut self) {
+        if let Some(child) = &mut self.child {
+            let _ = child.kill();
+            let _ = child.wait();
+        }
+    }
+}
+
+/// Whether `input` names a camera device that ffmpeg reads through Video4Linux2.
+pub fn is_capture_device(input: &Path) -> bool {
+    cfg!(target_os = "linux")
+        && input
+            .to_str()
+            .is_some_and(|s| s.starts_with("/dev/video") && s.len() > "/dev/video".len())
 }
 
 /// A sequence of frames from a directory, a y4m stream or ffmpeg.
@@ -71,11 +222,19 @@ impl FrameSource {
         {
             return Err(Error::Config(format!("--fps must be positive, got {f}")));
         }
+        let device = is_capture_device(input);
         let (inner, fps) = if input.as_os_str() == "-" {
             let r = Y4mReader::new(Box::new(BufReader::new(std::io::stdin())), input)?;
             let fps = r.fps;
             (Inner::Y4m(Box::new(r), None), fps)
         } else if input.is_dir() {
+            if opts.live {
+                return Err(Error::invalid(
+                    input,
+                    "a directory of images cannot be read live: give a camera device, a video \
+                     or `-` for a y4m stream",
+                ));
+            }
             (
                 Inner::Dir {
                     files: list_images(input)?,
@@ -83,7 +242,7 @@ impl FrameSource {
                 },
                 None,
             )
-        } else if !input.exists() {
+        } else if !device && !input.exists() {
             return Err(Error::read(
                 input,
                 std::io::Error::new(std::io::ErrorKind::NotFound, "no such file or directory"),
@@ -97,9 +256,13 @@ impl FrameSource {
             let fps = r.fps;
             (Inner::Y4m(Box::new(r), None), fps)
         } else {
-            let (r, child) = spawn_ffmpeg(input)?;
+            let (r, child) = spawn_ffmpeg(input, device)?;
             let fps = r.fps;
             (Inner::Y4m(Box::new(r), Some(child)), fps)
+        };
+        let inner = match inner {
+            Inner::Y4m(r, child) if opts.live || device => Inner::Live(Live::start(*r, child)),
+            other => other,
         };
         Ok(Self {
             inner,
@@ -120,7 +283,15 @@ impl FrameSource {
     pub fn len_hint(&self) -> Option<usize> {
         match &self.inner {
             Inner::Dir { files, .. } => Some(files.len()),
-            Inner::Y4m(..) => None,
+            Inner::Y4m(..) | Inner::Live(_) => None,
+        }
+    }
+
+    /// The counters of a live source (`None` when the source is not live).
+    pub fn live_stats(&self) -> Option<Arc<LiveStats>> {
+        match &self.inner {
+            Inner::Live(l) => Some(Arc::clone(&l.shared.stats)),
+            Inner::Dir { .. } | Inner::Y4m(..) => None,
         }
     }
 
@@ -138,7 +309,7 @@ impl FrameSource {
     pub fn directory(&self) -> Option<&Path> {
         match self.inner {
             Inner::Dir { .. } => Some(&self.name),
-            Inner::Y4m(..) => None,
+            Inner::Y4m(..) | Inner::Live(_) => None,
         }
     }
 
@@ -192,6 +363,10 @@ impl FrameSource {
                         }
                     }
                 }
+                Inner::Live(live) => match live.next(&self.name)? {
+                    Some((index, img)) => (index, Ok(img)),
+                    None => return Ok(None),
+                },
             };
             let img = match got {
                 Ok(img) => img,
@@ -236,7 +411,7 @@ impl FrameSource {
     fn frame_file(&self, index: usize) -> Option<&Path> {
         match &self.inner {
             Inner::Dir { files, .. } => files.get(index).map(PathBuf::as_path),
-            Inner::Y4m(..) => None,
+            Inner::Y4m(..) | Inner::Live(_) => None,
         }
     }
 }
@@ -286,9 +461,15 @@ pub fn list_images(dir: &Path) -> Result<Vec<PathBuf>> {
     Ok(files)
 }
 
-fn spawn_ffmpeg(input: &Path) -> Result<(Y4mReader, Child)> {
-    let mut child = Command::new("ffmpeg")
-        .args(["-hide_banner", "-loglevel", "error", "-nostdin", "-i"])
+fn spawn_ffmpeg(input: &Path, device: bool) -> Result<(Y4mReader, Child)> {
+    let mut cmd = Command::new("ffmpeg");
+    cmd.args(["-hide_banner", "-loglevel", "error", "-nostdin"]);
+    if device {
+        // A camera: Video4Linux2, without buffering frames ahead.
+        cmd.args(["-f", "v4l2", "-fflags", "nobuffer"]);
+    }
+    let mut child = cmd
+        .arg("-i")
         .arg(input)
         .args([
             "-f",
@@ -637,6 +818,7 @@ mod tests {
             &FrameOptions {
                 fps: Some(10.0),
                 skip_bad_frames: true,
+                live: false,
             },
         )
         .unwrap();
@@ -649,6 +831,56 @@ mod tests {
             .err()
             .unwrap();
         assert!(e.is_input_error() && e.to_string().contains("no frames"));
+    }
+
+    #[test]
+    fn live_source_drops_what_a_slow_consumer_misses() {
+        let d = tempfile::tempdir().unwrap();
+        let f = frames(40, 9, 5);
+        let p = d.path().join("a.y4m");
+        write_y4m(std::fs::File::create(&p).unwrap(), &f, 25.0).unwrap();
+        let live = FrameOptions {
+            live: true,
+            ..FrameOptions::default()
+        };
+        let mut s = FrameSource::open(&p, &live).unwrap();
+        let stats = s.live_stats().unwrap();
+        let mut got = Vec::new();
+        while let Some(frame) = s.next_frame().unwrap() {
+            // Slower than the reader: it delivers the whole file meanwhile.
+            std::thread::sleep(Duration::from_millis(20));
+            got.push(frame.index);
+        }
+        assert!(got.windows(2).all(|w| w[0] < w[1]), "{got:?}");
+        assert_eq!(got.last(), Some(&39), "the last frame is never dropped");
+        assert_eq!(stats.received(), 40);
+        assert_eq!(stats.dropped() + got.len(), 40);
+        assert!(stats.dropped() > 0, "{got:?}");
+        // Frame times keep the source's clock across drops.
+        let mut s = FrameSource::open(&p, &live).unwrap();
+        std::thread::sleep(Duration::from_millis(100));
+        let last = std::iter::from_fn(|| s.next_frame().unwrap()).last().unwrap();
+        assert!((last.time - 39.0 / 25.0).abs() < 1e-9);
+        // A truncated live stream is an error naming the frame.
+        let mut bytes = std::fs::read(&p).unwrap();
+        bytes.truncate(bytes.len() - 10);
+        let q = d.path().join("cut.y4m");
+        std::fs::write(&q, bytes).unwrap();
+        let mut s = FrameSource::open(&q, &live).unwrap();
+        let err = loop {
+            match s.next_frame() {
+                Ok(Some(_)) => {}
+                Ok(None) => panic!("a truncated stream must not end cleanly"),
+                Err(e) => break e.to_string(),
+            }
+        };
+        assert!(err.contains("cut.y4m") && err.contains("frame 39"), "{err}");
+        // Directories are not live.
+        let err = FrameSource::open(d.path(), &live).err().unwrap().to_string();
+        assert!(err.contains("cannot be read live"), "{err}");
+        assert!(is_capture_device(Path::new("/dev/video0")) == cfg!(target_os = "linux"));
+        assert!(!is_capture_device(Path::new("/dev/video")));
+        assert!(!is_capture_device(Path::new("video0.mp4")));
     }
 
     #[test]

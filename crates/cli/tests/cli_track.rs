@@ -332,6 +332,82 @@ fn mp4_through_ffmpeg() {
     assert_eq!(rows, n);
 }
 
+/// A camera stand-in: ffmpeg plays a y4m file paced in time (`-readrate 4`, four times its rate)
+/// into `track --input - --live`, which keeps up or drops frames and says how many.
+#[test]
+fn live_stream_from_ffmpeg_in_real_time() {
+    let f = fixture();
+    if Command::new("ffmpeg").arg("-version").output().is_err() {
+        eprintln!("note: ffmpeg is not installed; the live test is skipped");
+        return;
+    }
+    let frames: Vec<_> = actrack::frames::list_images(&f.root.join("video/frames"))
+        .unwrap()
+        .iter()
+        .map(|p| image::open(p).unwrap().to_rgb8())
+        .collect();
+    let src = f.root.join("live-src.y4m");
+    actrack::frames::write_y4m(std::fs::File::create(&src).unwrap(), &frames, 30.0).unwrap();
+    let mut player = Command::new("ffmpeg")
+        .args(["-v", "error", "-readrate", "4", "-i"])
+        .arg(&src)
+        .args([
+            "-f",
+            "yuv4mpegpipe",
+            "-pix_fmt",
+            "yuv444p",
+            "-strict",
+            "-1",
+            "-",
+        ])
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let out = Command::new(BIN)
+        .args([
+            "track",
+            "--model",
+            "model.actrack.json",
+            "--scene",
+            "scene.toml",
+            "--input",
+            "-",
+            "--live",
+            "--particles",
+            "60",
+            "--csv",
+            "live.csv",
+        ])
+        .stdin(Stdio::from(player.stdout.take().unwrap()))
+        .current_dir(&f.root)
+        .output()
+        .unwrap();
+    assert!(player.wait().unwrap().success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    // "live: N frames arrived, K tracked, D dropped (…)"
+    let line = err.lines().find(|l| l.contains("frames arrived")).unwrap();
+    let nums: Vec<usize> = line
+        .split(|c: char| !c.is_ascii_digit())
+        .filter_map(|t| t.parse().ok())
+        .collect();
+    let [arrived, tracked, dropped] = nums[..3] else {
+        panic!("{line}")
+    };
+    assert_eq!(arrived, frames.len(), "{line}");
+    assert_eq!(tracked + dropped, arrived, "{line}");
+    let csv = std::fs::read_to_string(f.root.join("live.csv")).unwrap();
+    let rows: Vec<usize> = csv
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .skip(1)
+        .map(|l| l.split(',').next().unwrap().parse().unwrap())
+        .collect();
+    assert_eq!(rows.len(), tracked);
+    assert!(rows.windows(2).all(|w| w[0] < w[1]), "{rows:?}");
+    assert_eq!(rows.last(), Some(&(frames.len() - 1)));
+}
+
 fn expect_input_error(out: &std::process::Output, needle: &[&str]) {
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{err}");

@@ -521,7 +521,7 @@ pub fn track_video<'py>(
                 &source,
                 &FrameOptions {
                     fps,
-                    skip_bad_frames: false,
+                    ..FrameOptions::default()
                 },
             )?;
             let stop = AtomicBool::new(false);

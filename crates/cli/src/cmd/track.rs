@@ -92,6 +92,10 @@ pub struct Args {
     /// Skip corrupt frames and frames of another size instead of stopping.
     #[arg(long)]
     pub skip_bad_frames: bool,
+    /// Read the input live, as a camera device always is: the newest frame wins, frames the
+    /// tracker has no time for are dropped, and the frame rates in and out are shown.
+    #[arg(long)]
+    pub live: bool,
 }
 
 /// Runs `track`.
@@ -135,8 +139,10 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
         &FrameOptions {
             fps: args.fps,
             skip_bad_frames: args.skip_bad_frames,
+            live: args.live,
         },
     )?;
+    let live = source.live_stats();
     install_stop_handler();
     let outputs = TrackOutputs {
         mcap: args.output.clone(),
@@ -145,9 +151,19 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
         overlay: args.overlay.clone(),
     };
     let bar = super::frame_bar(source.len_hint());
+    let started = std::time::Instant::now();
+    let mut readout = LiveReadout::default();
     let mut progress = |done: usize, _total: Option<usize>| {
         if let Some(b) = &bar {
             b.set_position(done as u64);
+        }
+        if let Some(stats) = &live
+            && let Some(line) = readout.update(started.elapsed().as_secs_f64(), done, stats)
+        {
+            match &bar {
+                Some(b) => b.set_message(line),
+                None => eprintln!("{line}"),
+            }
         }
     };
     let summary = track(
@@ -173,6 +189,14 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
         1000.0 * summary.filter_seconds / summary.frames.max(1) as f64,
         config.filter.particles
     );
+    if let Some(stats) = &live {
+        eprintln!(
+            "live: {} frames arrived, {} tracked, {} dropped (the tracker had no time for them)",
+            stats.received(),
+            summary.frames,
+            stats.dropped()
+        );
+    }
     for (what, p) in [
         ("MCAP", &args.output),
         ("CSV", &args.csv),
@@ -205,4 +229,34 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
         return Ok(interrupted_code());
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// The frame-rate readout of a live source: once a second, the rates in (from the source) and out
+/// (tracked) over the last second and the frames dropped so far.
+#[derive(Default)]
+struct LiveReadout {
+    last: Option<(f64, usize, usize)>,
+}
+
+impl LiveReadout {
+    fn update(
+        &mut self,
+        now: f64,
+        tracked: usize,
+        stats: &actrack::frames::LiveStats,
+    ) -> Option<String> {
+        let received = stats.received();
+        let (t0, r0, k0) = *self.last.get_or_insert((0.0, 0, 0));
+        let dt = now - t0;
+        if dt < 1.0 {
+            return None;
+        }
+        self.last = Some((now, received, tracked));
+        Some(format!(
+            "live: {:.1} frames/s in, {:.1} tracked/s, {} dropped",
+            (received - r0) as f64 / dt,
+            (tracked - k0) as f64 / dt,
+            stats.dropped()
+        ))
+    }
 }
