@@ -20,7 +20,7 @@ use crate::frames::{FrameOptions, FrameSource};
 use crate::model::{Action, ActionModel, ArmLengths, Provenance, THETA_FRAME};
 use crate::motion::{ACTIONS, demonstrations};
 use crate::pipeline::{TrackOutputs, TrackSummary, track};
-use crate::scene::{Scene, default_scene};
+use crate::scene::{Camera, Scene, default_scene, look_at};
 use crate::synth::{
     MotionSource, motion_params, random_targets, render_frames, save_frames, sequence,
 };
@@ -193,6 +193,22 @@ pub fn train_generator_model(
     Ok((model, demos.len()))
 }
 
+/// The demo's scene: [`default_scene`]'s table and actor, filmed as a user would set a camera
+/// up — across the table, out to the acting arm's side and above the shoulder, with a 65°
+/// horizontal field of view — so that the actions' paths differ across the image and not only
+/// along the line of sight.
+pub fn demo_scene(width: u32, height: u32) -> Scene {
+    let mut scene = default_scene(width, height);
+    let shoulder = scene.actor.origin;
+    let eye = shoulder + nalgebra::Vector3::new(0.6, 1.3, 0.6);
+    let target = shoulder + nalgebra::Vector3::new(-0.1, 0.3, -0.1);
+    let f = 0.5 * f64::from(width) / (0.5 * 65f64.to_radians()).tan();
+    if let Some(pose) = look_at(eye, target, nalgebra::Vector3::z()) {
+        scene.cameras = vec![Camera::centred("camera0", (width, height), f, pose)];
+    }
+    scene
+}
+
 /// Runs the demo; `say` receives one line per stage.
 pub fn run_demo(
     opts: &DemoOptions,
@@ -203,7 +219,7 @@ pub fn run_demo(
     let dir = &opts.dir;
     std::fs::create_dir_all(dir).map_err(|e| Error::write(dir, e))?;
     let p = |n: &str| dir.join(n);
-    let scene = default_scene(opts.size.0, opts.size.1);
+    let scene = demo_scene(opts.size.0, opts.size.1);
     let scene_path = p("scene.toml");
     std::fs::write(&scene_path, scene.to_toml_string())
         .map_err(|e| Error::write(&scene_path, e))?;
