@@ -92,6 +92,9 @@ def frame_ids(schema_name, msg):
 def main(argv):
     path = argv[1]
     expect = int(argv[argv.index("--expect-frames") + 1]) if "--expect-frames" in argv else None
+    # --particles N: every /actrack/particles message draws at most N spheres, the fullest N.
+    drawn = int(argv[argv.index("--particles") + 1]) if "--particles" in argv else None
+    spheres = []
     errors = []
     counts = {}
     parents = {}
@@ -126,6 +129,8 @@ def main(argv):
                     errors.append(f"{channel.topic}: message {message.sequence} has an empty frame_id")
                 elif schema.name != "foxglove.FrameTransforms" and not fid.startswith("("):
                     used_frames.add(fid)
+            if channel.topic == "/actrack/particles":
+                spheres.append(sum(len(e.get("spheres", [])) for e in msg["entities"]))
             if schema.name == "foxglove.FrameTransforms":
                 for t in msg["transforms"]:
                     parents[t["child_frame_id"]] = t["parent_frame_id"]
@@ -146,6 +151,8 @@ def main(argv):
             errors.append(f"{topic}: log times are not in order")
     if expect is not None and counts.get("/actrack/estimate") != expect:
         errors.append(f"expected {expect} frames, /actrack/estimate has {counts.get('/actrack/estimate')}")
+    if drawn is not None and (not spheres or max(spheres) != drawn):
+        errors.append(f"/actrack/particles: expected at most and at best {drawn} spheres, got {sorted(set(spheres))[-5:]}")
     print(json.dumps({"topics": counts, "frames": sorted(used_frames | set(parents)), "errors": errors[:20]}))
     return 1 if errors else 0
 

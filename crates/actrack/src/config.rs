@@ -276,6 +276,10 @@ pub struct OutputConfig {
     pub median: Median,
     /// W, frames (odd when centred).
     pub median_window: usize,
+    /// Particles drawn per frame on the MCAP topic `/actrack/particles` (the θ cloud), as a
+    /// systematic sample of the filter's particles; 0 leaves the cloud out. Writing every
+    /// particle costs more than tracking it.
+    pub mcap_particles: usize,
 }
 
 /// The kind of median filter of the reported pose.
@@ -378,6 +382,7 @@ impl Default for OutputConfig {
         Self {
             median: Median::Centred,
             median_window: 7,
+            mcap_particles: 400,
         }
     }
 }
@@ -657,6 +662,12 @@ impl TrackConfig {
             return Err(bad(
                 "output.median_window",
                 format!("must be in [1, 1001] frames, got {}", out.median_window),
+            ));
+        }
+        if out.mcap_particles > 1_000_000 {
+            return Err(bad(
+                "output.mcap_particles",
+                format!("must be at most 1000000, got {}", out.mcap_particles),
             ));
         }
         if out.median == Median::Centred && out.median_window.is_multiple_of(2) {

@@ -369,10 +369,14 @@ pub fn track(
         let r = session.step_rgb(frame.index, &[&frame.image])?;
         tracked += 1;
         filter_seconds += session.last_times().total * 1e-3;
-        let particles = if sink.writer.is_some() {
+        let shown = config.output.mcap_particles;
+        let particles = if sink.writer.is_some() && shown > 0 {
             session.tracker().cloud_into(&mut cloud);
-            cloud
-                .iter()
+            // A systematic sample: the cloud is grouped by action, so each action keeps its
+            // share.
+            let step = (cloud.len() as f64 / shown as f64).max(1.0);
+            (0..cloud.len().min(shown))
+                .map(|i| &cloud[((i as f64 + 0.5) * step) as usize])
                 .map(|c| (c.action, scene.theta_to_world(c.theta).into()))
                 .collect()
         } else {

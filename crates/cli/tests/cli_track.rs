@@ -408,6 +408,41 @@ fn live_stream_from_ffmpeg_in_real_time() {
     assert_eq!(rows.last(), Some(&(frames.len() - 1)));
 }
 
+/// `output.mcap_particles` caps the θ cloud drawn on `/actrack/particles` (a sample of the
+/// filter's particles), and the file stays valid for the official reader.
+#[test]
+fn mcap_particle_cloud_is_capped() {
+    let f = fixture();
+    if !python_has_mcap() {
+        eprintln!("note: python3 with mcap and jsonschema is missing; skipped");
+        return;
+    }
+    let out = track(
+        &f.root,
+        "video/frames",
+        &["-o", "cap.mcap", "--set", "output.mcap_particles=25"],
+        None,
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/python/validate_mcap.py");
+    let v = Command::new("python3")
+        .arg(script)
+        .arg(f.root.join("cap.mcap"))
+        .args(["--particles", "25"])
+        .output()
+        .unwrap();
+    assert!(
+        v.status.success(),
+        "{}\n{}",
+        String::from_utf8_lossy(&v.stdout),
+        String::from_utf8_lossy(&v.stderr)
+    );
+}
+
 fn expect_input_error(out: &std::process::Output, needle: &[&str]) {
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{err}");
