@@ -859,7 +859,9 @@ mod tests {
         // Frame times keep the source's clock across drops.
         let mut s = FrameSource::open(&p, &live).unwrap();
         std::thread::sleep(Duration::from_millis(100));
-        let last = std::iter::from_fn(|| s.next_frame().unwrap()).last().unwrap();
+        let last = std::iter::from_fn(|| s.next_frame().unwrap())
+            .last()
+            .unwrap();
         assert!((last.time - 39.0 / 25.0).abs() < 1e-9);
         // A truncated live stream is an error naming the frame.
         let mut bytes = std::fs::read(&p).unwrap();
@@ -876,7 +878,10 @@ mod tests {
         };
         assert!(err.contains("cut.y4m") && err.contains("frame 39"), "{err}");
         // Directories are not live.
-        let err = FrameSource::open(d.path(), &live).err().unwrap().to_string();
+        let err = FrameSource::open(d.path(), &live)
+            .err()
+            .unwrap()
+            .to_string();
         assert!(err.contains("cannot be read live"), "{err}");
         assert!(is_capture_device(Path::new("/dev/video0")) == cfg!(target_os = "linux"));
         assert!(!is_capture_device(Path::new("/dev/video")));
