@@ -825,8 +825,9 @@ impl Threshold {
     }
 }
 
-/// The grey image of SPEC §4.1 step 1 (the edge image's own conversion, [`grey_row`]), row-major
-/// into `out` (resized); `chan` is scratch.
+/// The grey image of SPEC §4.1 step 1, converted as [`EdgeWorkspace::compute`] converts it
+/// (0.299 R + 0.587 G + 0.114 B for colour frames), row-major into `out` (resized); `chan` is
+/// scratch.
 pub fn grey_image(frame: ImageView<'_>, chan: &mut Vec<f32>, out: &mut Vec<f32>) {
     let (w, h) = frame.size();
     let (w, h) = (w as usize, h as usize);
