@@ -1,7 +1,7 @@
 //! `actrack.Tracker` (an [`actrack::Session`]: the action-space particle filter with the
 //! configured observation model, frame by frame from numpy images) and `actrack.track_video`
 //! (the `actrack-cli track` pipeline on a file: MCAP and CSV out). Both release the GIL while
-//! they compute, and both take the same configuration keywords ([`build_config`]): a
+//! they compute, and both take the same configuration keywords (read by `build_config`): a
 //! `TrackConfig` from a file, a dict or a preset, then `set=["key=value", …]`, `n_particles`
 //! and `seed`.
 

@@ -65,7 +65,7 @@ pub struct Args {
     /// Reject the calibration when a corner reprojects further than this, pixels.
     #[arg(long, default_value_t = 5.0)]
     pub max_error: f64,
-    /// Edge threshold τ written into the scene's [edges] (SPEC §4.1; lower for low contrast).
+    /// Edge threshold τ written into the scene's `[edges]` table (SPEC §4.1; lower for low contrast).
     #[arg(long, default_value_t = 0.2)]
     pub tau: f64,
     /// The model whose rest pose the preview draws (default: the shipped default model).

@@ -1,0 +1,383 @@
+use super::*;
+
+/// Straightforward reference of SPEC §4.1 in f64 with per-pixel clamping.
+#[allow(clippy::imprecise_flops)]
+fn reference(grey: &[f64], w: usize, h: usize, p: &EdgeParams) -> Vec<f64> {
+    let at = |x: i64, y: i64| {
+        let x = x.clamp(0, w as i64 - 1) as usize;
+        let y = y.clamp(0, h as i64 - 1) as usize;
+        grey[y * w + x]
+    };
+    let mut g = vec![0.0; w * h];
+    for y in 0..h as i64 {
+        for x in 0..w as i64 {
+            let gx = (at(x + 1, y - 1) + 2.0 * at(x + 1, y) + at(x + 1, y + 1)
+                - at(x - 1, y - 1)
+                - 2.0 * at(x - 1, y)
+                - at(x - 1, y + 1))
+                / 8.0;
+            let gy = (at(x - 1, y + 1) + 2.0 * at(x, y + 1) + at(x + 1, y + 1)
+                - at(x - 1, y - 1)
+                - 2.0 * at(x, y - 1)
+                - at(x + 1, y - 1))
+                / 8.0;
+            g[y as usize * w + x as usize] = (gx * gx + gy * gy).sqrt();
+        }
+    }
+    let m = g.iter().copied().fold(0.0, f64::max);
+    for v in &mut g {
+        *v /= m;
+        if *v > f64::from(p.tau) {
+            *v = 1.0;
+        } else if p.binary {
+            *v = 0.0;
+        }
+    }
+    let s = f64::from(p.sigma);
+    let r = (3.0 * s).ceil() as i64;
+    let k: Vec<f64> = (-r..=r)
+        .map(|j| (-((j * j) as f64) / (2.0 * s * s)).exp())
+        .collect();
+    let gat = |g: &[f64], x: i64, y: i64| {
+        g[y.clamp(0, h as i64 - 1) as usize * w + x.clamp(0, w as i64 - 1) as usize]
+    };
+    let mut t = vec![0.0; w * h];
+    for y in 0..h as i64 {
+        for x in 0..w as i64 {
+            t[y as usize * w + x as usize] = (-r..=r)
+                .map(|j| k[(j + r) as usize] * gat(&g, x + j, y))
+                .sum();
+        }
+    }
+    let mut o = vec![0.0; w * h];
+    for y in 0..h as i64 {
+        for x in 0..w as i64 {
+            o[y as usize * w + x as usize] = (-r..=r)
+                .map(|j| k[(j + r) as usize] * gat(&t, x, y + j))
+                .sum();
+        }
+    }
+    let m = o.iter().copied().fold(0.0, f64::max);
+    o.iter().map(|v| v / m).collect()
+}
+
+fn test_frame(w: usize, h: usize) -> Vec<u8> {
+    let mut rgb = vec![0u8; w * h * 3];
+    for y in 0..h {
+        for x in 0..w {
+            let i = 3 * (y * w + x);
+            let inside = (x as f64 - 20.0).hypot(y as f64 - 15.0) < 9.0 || (x > 30 && y > 20);
+            let base = if inside { 200u8 } else { 40 };
+            rgb[i] = base;
+            rgb[i + 1] = base.wrapping_add((x * 7 % 13) as u8);
+            rgb[i + 2] = (y * 3 % 50) as u8;
+        }
+    }
+    rgb
+}
+
+#[test]
+fn matches_reference() {
+    for &(w, h) in &[(45usize, 37usize), (8, 5), (1, 1), (3, 40), (17, 2)] {
+        let rgb = test_frame(w, h);
+        let grey: Vec<f64> = rgb
+            .chunks_exact(3)
+            .map(|p| 0.299 * f64::from(p[0]) + 0.587 * f64::from(p[1]) + 0.114 * f64::from(p[2]))
+            .collect();
+        for params in [
+            EdgeParams::default(),
+            EdgeParams {
+                tau: 0.35,
+                sigma: 1.5,
+                binary: true,
+            },
+            EdgeParams {
+                tau: 0.1,
+                sigma: 2.2,
+                binary: false,
+            },
+        ] {
+            let mut ws = EdgeWorkspace::new();
+            let g = ws
+                .compute(ImageView::rgb8(&rgb, w as u32, h as u32).unwrap(), &params)
+                .unwrap()
+                .clone();
+            let has_gradient = grey.iter().any(|&v| (v - grey[0]).abs() > 1e-9);
+            if !has_gradient {
+                assert!(g.data().iter().all(|&v| v == 0.0));
+                continue;
+            }
+            let r = reference(&grey, w, h, &params);
+            let err = g
+                .data()
+                .iter()
+                .zip(&r)
+                .map(|(&a, &b)| (f64::from(a) - b).abs())
+                .fold(0.0, f64::max);
+            assert!(err < 1e-4, "{w}×{h} {params:?}: {err}");
+            assert!((max_value(g.data()) - 1.0).abs() < 1e-6);
+        }
+    }
+}
+
+/// `compute_into` gives what `compute` gives and only trades buffers with the caller.
+#[test]
+fn compute_into_swaps_without_copying() {
+    let (w, h) = (45usize, 37usize);
+    let a = test_frame(w, h);
+    let b: Vec<u8> = a.iter().rev().copied().collect();
+    let mut ws = EdgeWorkspace::new();
+    let mut reference = EdgeWorkspace::new();
+    let mut out = EdgeImage::default();
+    let p = EdgeParams::default();
+    for rgb in [&a, &b, &a] {
+        let frame = ImageView::rgb8(rgb, w as u32, h as u32).unwrap();
+        ws.compute_into(frame, &p, &mut out).unwrap();
+        assert_eq!(&out, reference.compute(frame, &p).unwrap());
+    }
+    // After two frames the two buffers just trade places: no new allocation.
+    let before = out.data.as_ptr();
+    let frame = ImageView::rgb8(&b, w as u32, h as u32).unwrap();
+    ws.compute_into(frame, &p, &mut out).unwrap();
+    ws.compute_into(frame, &p, &mut out).unwrap();
+    assert_eq!(out.data.as_ptr(), before);
+    let bad = ImageView::rgb8(&b, 0, 0);
+    assert!(bad.is_err() || ws.compute_into(bad.unwrap(), &p, &mut out).is_err());
+}
+
+/// Parameter sets of the bit-identity tests: the defaults, a binary map with a small σ, no
+/// smoothing.
+fn variant_params() -> [EdgeParams; 3] {
+    [
+        EdgeParams::default(),
+        EdgeParams {
+            tau: 0.35,
+            sigma: 1.5,
+            binary: true,
+        },
+        EdgeParams {
+            sigma: 0.0,
+            ..EdgeParams::default()
+        },
+    ]
+}
+
+/// The variant chosen at run time (AVX2 or AVX-512 on most x86-64 machines) gives the same
+/// G, bit for bit, as the baseline (SSE2) build of the same kernels.
+#[test]
+fn dispatched_equals_baseline() {
+    for &(w, h) in &[(45usize, 37usize), (67, 9), (2, 3)] {
+        let rgb = test_frame(w, h);
+        let frame = ImageView::rgb8(&rgb, w as u32, h as u32).unwrap();
+        for params in variant_params() {
+            let mut ws = EdgeWorkspace::new();
+            let fast = ws.compute(frame, &params).unwrap().clone();
+            let mut base = EdgeWorkspace::new();
+            base.compute_banded(&frame, &params, 1, Isa::Scalar);
+            assert_eq!(fast, base.out, "{w}×{h} {params:?}");
+            // Split into bands, the baseline variant gives the same G as well.
+            base.compute_banded(&frame, &params, 3, Isa::Scalar);
+            assert_eq!(fast, base.out, "{w}×{h} {params:?}, 3 bands");
+        }
+    }
+}
+
+/// G is bit-identical for every split into row bands (from one band to one row per band,
+/// bands thinner than the Gaussian's halo) and for every thread count of the pool,
+/// including images smaller than a band; a workspace reused across sizes and band counts
+/// gives the same G as a fresh one.
+#[test]
+fn bands_and_threads_give_identical_g() {
+    let params = variant_params();
+    let mut reused = EdgeWorkspace::new();
+    for &(w, h) in &[
+        (45usize, 37usize),
+        (67, 9),
+        (2, 3),
+        (1, 1),
+        (17, 2),
+        (131, 97),
+        (5, 70),
+    ] {
+        let rgb = test_frame(w, h);
+        let frame = ImageView::rgb8(&rgb, w as u32, h as u32).unwrap();
+        for p in &params {
+            let mut one = EdgeWorkspace::new();
+            one.compute_banded(&frame, p, 1, Isa::Dispatch(pulp::Arch::new()));
+            let g = one.out.clone();
+            for bands in [2, 3, 4, 7, h / 2, h, h + 5] {
+                reused.compute_banded(&frame, p, bands, Isa::Dispatch(pulp::Arch::new()));
+                assert_eq!(reused.out, g, "{w}×{h} {p:?}, {bands} bands");
+            }
+            for threads in [1, 2, 3] {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                let mut ws = EdgeWorkspace::new();
+                let got = pool.install(|| ws.compute(frame, p).unwrap().clone());
+                assert_eq!(got, g, "{w}×{h} {p:?}, {threads} threads");
+            }
+        }
+    }
+}
+
+/// Different band counts for the Sobel and the Gaussian passes, run by several workers on
+/// pools of 1–3 threads (more workers than threads included: a worker that finds every
+/// band claimed returns), give the same G as one band.
+#[test]
+fn workers_and_mixed_splits_give_identical_g() {
+    let params = variant_params();
+    for &(w, h) in &[(45usize, 37usize), (131, 97), (5, 70), (17, 2)] {
+        let rgb = test_frame(w, h);
+        let frame = ImageView::rgb8(&rgb, w as u32, h as u32).unwrap();
+        for p in &params {
+            let mut one = EdgeWorkspace::new();
+            one.compute_banded(&frame, p, 1, Isa::Dispatch(pulp::Arch::new()));
+            let mut ws = EdgeWorkspace::new();
+            for threads in [1, 2, 3] {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                for (sobel, gauss) in [(8, 2), (3, 5), (1, 4), (h, 1), (h, h)] {
+                    for workers in [1, 2, 4] {
+                        pool.install(|| {
+                            ws.compute_split(
+                                &frame,
+                                p,
+                                Split::forced(h, sobel, gauss),
+                                workers,
+                                Isa::Dispatch(pulp::Arch::new()),
+                            );
+                        });
+                        assert_eq!(
+                            ws.out, one.out,
+                            "{w}×{h} {p:?}, {sobel}/{gauss} bands, {workers} workers, {threads} threads"
+                        );
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// The Gaussian pass split into column strips of any width (one column, narrower than the
+/// kernel's radius, not dividing the width, the whole width) gives the same G, bit for bit,
+/// as the automatic width, in both instruction-set variants; the automatic width is a
+/// multiple of 8 whose ring fits in `RING_BYTES`.
+#[test]
+fn column_strips_give_identical_g() {
+    for &(w, h) in &[(45usize, 37usize), (131, 20), (2, 3), (300, 9)] {
+        let rgb = test_frame(w, h);
+        let frame = ImageView::rgb8(&rgb, w as u32, h as u32).unwrap();
+        for p in &variant_params() {
+            let mut auto = EdgeWorkspace::new();
+            auto.compute_banded(&frame, p, 1, Isa::Dispatch(pulp::Arch::new()));
+            let mut ws = EdgeWorkspace::new();
+            for strip in [1, 3, 8, 17, 64, w - 1, w, w + 9] {
+                for isa in [Isa::Dispatch(pulp::Arch::new()), Isa::Scalar] {
+                    let split = Split {
+                        strip: Some(strip.max(1)),
+                        ..Split::forced(h, 2, 2)
+                    };
+                    ws.compute_split(&frame, p, split, 1, isa);
+                    assert_eq!(ws.out, auto.out, "{w}×{h} {p:?}, strips of {strip}");
+                }
+            }
+        }
+    }
+    for (w, r) in [
+        (640, 12),
+        (1920, 12),
+        (640, 3),
+        (100, 12),
+        (7, 1),
+        (640, 300),
+    ] {
+        let sw = strip_columns(w, r);
+        assert!(sw >= 1 && sw <= w, "{w} {r}: {sw}");
+        assert!(sw == w || sw.is_multiple_of(8), "{w} {r}: {sw}");
+        // At least 64 columns: a wider kernel's ring may exceed the budget.
+        assert!(sw >= 64.min(w), "{w} {r}: {sw}");
+        if sw < w && (2 * r + 1) * 64 * 4 <= RING_BYTES {
+            assert!((2 * r + 1) * sw * 4 <= RING_BYTES, "{w} {r}: {sw}");
+        }
+    }
+    assert_eq!(strip_columns(640, 12), 216);
+}
+
+#[test]
+fn constant_frame_gives_zero_and_reuse() {
+    let mut ws = EdgeWorkspace::new();
+    let flat = vec![77u8; 30 * 20];
+    let g = ws.compute(
+        ImageView::grey8(&flat, 30, 20).unwrap(),
+        &EdgeParams::default(),
+    );
+    assert!(g.unwrap().data().iter().all(|&v| v == 0.0));
+    // Different sizes in sequence on one workspace.
+    let rgb = test_frame(50, 40);
+    let g = ws.compute(
+        ImageView::rgb8(&rgb, 50, 40).unwrap(),
+        &EdgeParams::default(),
+    );
+    let g = g.unwrap();
+    assert_eq!((g.width(), g.height()), (50, 40));
+    assert!(g.data().iter().all(|v| (0.0..=1.0).contains(v)));
+    let f: Vec<f32> = vec![f32::NAN; 12];
+    let g = ws.compute(
+        ImageView::grey_f32(&f, 4, 3).unwrap(),
+        &EdgeParams::default(),
+    );
+    assert!(g.unwrap().data().iter().all(|&v| v == 0.0));
+}
+
+#[test]
+fn bad_input() {
+    assert!(ImageView::rgb8(&[], 0, 0).is_err());
+    assert!(ImageView::rgb8(&[0; 10], 2, 2).is_err());
+    assert!(ImageView::grey8(&[0; 4], 0, 4).is_err());
+    let mut ws = EdgeWorkspace::new();
+    let bad = ImageView::Grey8 {
+        data: &[1, 2, 3],
+        width: 2,
+        height: 2,
+    };
+    assert!(ws.compute(bad, &EdgeParams::default()).is_err());
+    let img = [0u8; 4];
+    let v = ImageView::grey8(&img, 2, 2).unwrap();
+    assert!(
+        ws.compute(
+            v,
+            &EdgeParams {
+                tau: f32::NAN,
+                ..EdgeParams::default()
+            }
+        )
+        .is_err()
+    );
+    assert!(
+        ws.compute(
+            v,
+            &EdgeParams {
+                sigma: -1.0,
+                ..EdgeParams::default()
+            }
+        )
+        .is_err()
+    );
+}
+
+#[test]
+fn sampling() {
+    let g = EdgeImage::from_vec(3, 2, vec![0.0, 0.5, 1.0, 0.25, 0.75, 0.0]).unwrap();
+    assert_eq!(g.sample_nearest(1.4, 0.6), Some(0.75));
+    assert_eq!(g.sample_nearest(-0.6, 0.0), None);
+    assert_eq!(g.sample_nearest(2.49, 1.49), Some(0.0));
+    assert_eq!(g.sample_nearest(f64::NAN, 0.0), None);
+    let b = g.sample_bilinear(0.5, 0.5).unwrap();
+    assert!((b - (0.0 + 0.5 + 0.25 + 0.75) / 4.0).abs() < 1e-6);
+    assert_eq!(g.get(2, 0), Some(1.0));
+    assert_eq!(g.get(3, 0), None);
+}
