@@ -21,8 +21,6 @@ pub mod motion;
 pub mod observation;
 pub mod pipeline;
 pub mod plots;
-// The scene's docs quote SPEC's `[REC]` tag, which rustdoc would read as a link.
-#[allow(rustdoc::broken_intra_doc_links)]
 pub mod scene;
 pub mod session;
 pub mod synth;

@@ -240,7 +240,7 @@ pub struct SceneToml {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct EdgeSettings {
-    /// Threshold τ on the normalised gradient magnitude, in (0, 1] (SPEC [REC] 0.2).
+    /// Threshold τ on the normalised gradient magnitude, in (0, 1]; SPEC recommends 0.2.
     #[serde(default = "default_tau")]
     pub tau: f64,
     /// σ_G in pixels; default 4 px at 640 px width, scaled with each camera's width.
@@ -864,9 +864,8 @@ pub fn default_scene(width: u32, height: u32) -> Scene {
         },
         side: Side::Right,
         arm: ArmGeometry::default(),
-        // Chosen by a sweep of τ on this scene (3-action generator sequences, several target
-        // and filter seeds): τ = 0.2 → joint RMSE 4.1–6.4 cm, 2 of 3 actions; 0.1 → 2.0–2.2 cm;
-        // 0.05 → 1.8–2.2 cm, 3 of 3 (docs/results.md).
+        // Below SPEC's 0.2: the rendered arm's edges against the table are weak, and higher
+        // thresholds lose part of its outline.
         edges: EdgeSettings {
             tau: 0.05,
             ..EdgeSettings::default()
