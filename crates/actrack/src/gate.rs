@@ -9,7 +9,7 @@
 //! tracked arm's silhouette, so the arm is not learnt as background while the track follows it
 //! (a cup held at the mouth stays foreground).
 
-use actrack_render::{ArmGeometry, Camera, EdgeImage, ImageView, LocalNormScratch};
+use actrack_render::{ArmGeometry, Camera, DilateScratch, EdgeImage, ImageView};
 
 use crate::config::GateConfig;
 use crate::error::{Error, Result};
@@ -20,10 +20,14 @@ use crate::error::{Error, Result};
 pub struct ForegroundGate {
     background: Vec<f32>,
     chan: Vec<f32>,
+    /// The grey values of the frame `apply` gated last, for `update` of the same frame.
     grey: Vec<f32>,
+    /// Whether `grey` holds the frame that `update` is given next.
+    fresh: bool,
+    foreground: Vec<u8>,
     covered: Vec<u8>,
-    max: LocalNormScratch,
-    mask: Vec<f32>,
+    dilate: DilateScratch,
+    mask: Vec<u8>,
 }
 
 impl ForegroundGate {
@@ -54,34 +58,36 @@ impl ForegroundGate {
             )));
         }
         actrack_render::grey_image(view, &mut self.chan, &mut self.grey);
-        for (m, &b) in self.grey.iter_mut().zip(&self.background) {
-            *m = if (*m - b).abs() > cfg.threshold {
-                1.0
-            } else {
-                0.0
-            };
-        }
-        let mut mask = std::mem::take(&mut self.mask);
-        actrack_render::max_filter(
-            &self.grey,
+        self.fresh = true;
+        self.foreground.clear();
+        self.foreground.extend(
+            self.grey
+                .iter()
+                .zip(&self.background)
+                .map(|(&i, &b)| u8::from((i - b).abs() > cfg.threshold)),
+        );
+        actrack_render::dilate_mask(
+            &self.foreground,
             (w as usize, h as usize),
             cfg.radius as usize,
-            &mut self.max,
-            &mut mask,
+            &mut self.dilate,
+            &mut self.mask,
         )
         .map_err(|e| Error::Config(format!("foreground gate: {e}")))?;
+        // The factor floor + (1 − floor)·m for m = 1 and m = 0.
+        let (on, off) = (cfg.floor + (1.0 - cfg.floor), cfg.floor);
         let mut data = std::mem::take(g).into_data();
-        for (d, &m) in data.iter_mut().zip(&mask) {
-            *d *= cfg.floor + (1.0 - cfg.floor) * m;
+        for (d, &m) in data.iter_mut().zip(&self.mask) {
+            *d *= if m != 0 { on } else { off };
         }
-        self.mask = mask;
         *g = EdgeImage::from_vec(w, h, data)
             .map_err(|e| Error::Config(format!("foreground gate: {e}")))?;
         Ok(())
     }
 
     /// After a frame's step: blends `view` into the background at `cfg.rate` away from the
-    /// silhouettes of the `tracked` poses (world) grown by `cfg.margin` pixels.
+    /// silhouettes of the `tracked` poses (world) grown by `cfg.margin` pixels. `view` is the
+    /// frame last given to [`apply`](Self::apply), if any (its grey values are reused).
     ///
     /// # Errors
     /// When `view` and the background differ in size.
@@ -97,7 +103,10 @@ impl ForegroundGate {
         if self.background.is_empty() {
             actrack_render::grey_image(view, &mut self.chan, &mut self.background);
         }
-        actrack_render::grey_image(view, &mut self.chan, &mut self.grey);
+        // The grey frame of `apply` when this is the frame it gated.
+        if !std::mem::take(&mut self.fresh) || self.grey.len() != w as usize * h as usize {
+            actrack_render::grey_image(view, &mut self.chan, &mut self.grey);
+        }
         if self.grey.len() != self.background.len() {
             return Err(Error::Config(format!(
                 "foreground gate: a {w}×{h} frame against a background of {} pixels",

@@ -77,7 +77,9 @@ pub use error::RenderError;
 pub use gpu::{GpuError, GpuLikelihood};
 pub use image::{ImageRgb8, ImageView};
 pub use likelihood::{LikelihoodModel, SamplingMode};
-pub use local_norm::{LocalNorm, LocalNormScratch, local_normalise, max_filter};
+pub use local_norm::{
+    DilateScratch, LocalNorm, LocalNormScratch, dilate_mask, local_normalise, max_filter,
+};
 pub use silhouette::{ForegroundCounts, MAX_SILHOUETTE_PARTS, Overlap};
 
 /// An arm pose as it crosses crate boundaries: (p shoulder xyz, q elbow xyz, r fingertip xyz),

@@ -223,6 +223,85 @@ pub fn max_filter(
     Ok(())
 }
 
+/// The dilation of the 0/1 mask `src` (`width` × `height`, row-major; any non-zero value is 1)
+/// by the square of half-width `radius` (clamped at the borders), as 0/1 into `out` (resized):
+/// the same as [`max_filter`] on a 0/1 image, by counts in a sliding window (a row pass with
+/// prefix counts, a column pass with a running count per column), in bytes.
+pub fn dilate_mask(
+    src: &[u8],
+    (width, height): (usize, usize),
+    radius: usize,
+    scratch: &mut DilateScratch,
+    out: &mut Vec<u8>,
+) -> Result<(), RenderError> {
+    if width.checked_mul(height) != Some(src.len()) {
+        return Err(RenderError::InvalidImage(format!(
+            "dilation: {width}×{height} mask needs {} values, got {}",
+            width.saturating_mul(height),
+            src.len()
+        )));
+    }
+    let (w, h) = (width, height);
+    let DilateScratch {
+        rows,
+        prefix,
+        counts,
+    } = scratch;
+    rows.clear();
+    rows.resize(w * h, 0);
+    out.clear();
+    out.resize(w * h, 0);
+    if w == 0 || h == 0 {
+        return Ok(());
+    }
+    // Rows: a pixel is set when its row window [x − r, x + r] holds a set pixel.
+    prefix.clear();
+    prefix.resize(w + 1, 0);
+    for (s, d) in src.chunks_exact(w).zip(rows.chunks_exact_mut(w)) {
+        for x in 0..w {
+            prefix[x + 1] = prefix[x] + u32::from(s[x] != 0);
+        }
+        for (x, d) in d.iter_mut().enumerate() {
+            let (lo, hi) = (x.saturating_sub(radius), (x + radius + 1).min(w));
+            *d = u8::from(prefix[hi] > prefix[lo]);
+        }
+    }
+    // Columns: a running count of set row pixels over the rows [y − r, y + r].
+    counts.clear();
+    counts.resize(w, 0);
+    for row in rows.chunks_exact(w).take(radius.min(h - 1) + 1) {
+        for (c, &v) in counts.iter_mut().zip(row) {
+            *c += u32::from(v);
+        }
+    }
+    for y in 0..h {
+        for (o, &c) in out[y * w..(y + 1) * w].iter_mut().zip(counts.iter()) {
+            *o = u8::from(c > 0);
+        }
+        if y + radius + 1 < h {
+            let add = &rows[(y + radius + 1) * w..(y + radius + 2) * w];
+            for (c, &v) in counts.iter_mut().zip(add) {
+                *c += u32::from(v);
+            }
+        }
+        if y >= radius {
+            let sub = &rows[(y - radius) * w..(y - radius + 1) * w];
+            for (c, &v) in counts.iter_mut().zip(sub) {
+                *c -= u32::from(v);
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Buffers of [`dilate_mask`] (reused between frames).
+#[derive(Debug, Clone, Default)]
+pub struct DilateScratch {
+    rows: Vec<u8>,
+    prefix: Vec<u32>,
+    counts: Vec<u32>,
+}
+
 /// G divided by its local maximum ([`LocalNorm`]), into `out` (resized; its previous contents
 /// are replaced). Values stay in [0, 1]; a G of zeros stays zero.
 pub fn local_normalise(
@@ -324,6 +403,29 @@ mod tests {
         assert!(max_filter(&[0.0; 5], (2, 2), 1, &mut scratch, &mut out).is_err());
         max_filter(&[], (0, 4), 1, &mut scratch, &mut out).unwrap();
         assert!(out.is_empty());
+    }
+
+    /// The byte dilation against [`max_filter`] on the same 0/1 masks.
+    #[test]
+    fn dilate_mask_equals_max_filter() {
+        let mut u = lcg(7);
+        let (mut s1, mut s2) = (LocalNormScratch::default(), DilateScratch::default());
+        let (mut want, mut got) = (Vec::new(), Vec::new());
+        for (w, h) in [(1, 9), (9, 1), (13, 13), (31, 29), (50, 7)] {
+            for density in [0.02, 0.2, 0.7] {
+                let bits: Vec<u8> = (0..w * h).map(|_| u8::from(u() < density)).collect();
+                let f: Vec<f32> = bits.iter().map(|&b| f32::from(b)).collect();
+                for r in [0, 1, 2, 6, 13, 60] {
+                    max_filter(&f, (w, h), r, &mut s1, &mut want).unwrap();
+                    dilate_mask(&bits, (w, h), r, &mut s2, &mut got).unwrap();
+                    let want: Vec<u8> = want.iter().map(|&v| u8::from(v > 0.5)).collect();
+                    assert_eq!(got, want, "{w}x{h} r {r} density {density}");
+                }
+            }
+        }
+        assert!(dilate_mask(&[0; 5], (2, 2), 1, &mut s2, &mut got).is_err());
+        dilate_mask(&[], (0, 4), 1, &mut s2, &mut got).unwrap();
+        assert!(got.is_empty());
     }
 
     #[test]
