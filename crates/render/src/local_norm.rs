@@ -225,8 +225,9 @@ pub fn max_filter(
 
 /// The dilation of the 0/1 mask `src` (`width` × `height`, row-major; any non-zero value is 1)
 /// by the square of half-width `radius` (clamped at the borders), as 0/1 into `out` (resized):
-/// the same as [`max_filter`] on a 0/1 image, by counts in a sliding window (a row pass with
-/// prefix counts, a column pass with a running count per column), in bytes.
+/// the same as [`max_filter`] on a 0/1 image, in bytes and linear time for any radius — the
+/// columns by a running count per column over the window's rows, then the rows by filling
+/// each run of set pixels grown by the radius.
 pub fn dilate_mask(
     src: &[u8],
     (width, height): (usize, usize),
@@ -242,53 +243,65 @@ pub fn dilate_mask(
         )));
     }
     let (w, h) = (width, height);
-    let DilateScratch {
-        rows,
-        prefix,
-        counts,
-    } = scratch;
-    rows.clear();
-    rows.resize(w * h, 0);
+    let DilateScratch { cols, counts } = scratch;
+    cols.clear();
+    cols.resize(w * h, 0);
     out.clear();
     out.resize(w * h, 0);
     if w == 0 || h == 0 {
         return Ok(());
     }
-    // Rows: a pixel is set when its row window [x − r, x + r] holds a set pixel.
-    prefix.clear();
-    prefix.resize(w + 1, 0);
-    for (s, d) in src.chunks_exact(w).zip(rows.chunks_exact_mut(w)) {
-        for x in 0..w {
-            prefix[x + 1] = prefix[x] + u32::from(s[x] != 0);
-        }
-        for (x, d) in d.iter_mut().enumerate() {
-            let (lo, hi) = (x.saturating_sub(radius), (x + radius + 1).min(w));
-            *d = u8::from(prefix[hi] > prefix[lo]);
-        }
-    }
-    // Columns: a running count of set row pixels over the rows [y − r, y + r].
+    // Columns: the number of set pixels in rows [y − r, y + r] of each column.
     counts.clear();
     counts.resize(w, 0);
-    for row in rows.chunks_exact(w).take(radius.min(h - 1) + 1) {
+    for row in src.chunks_exact(w).take(radius.min(h - 1) + 1) {
         for (c, &v) in counts.iter_mut().zip(row) {
-            *c += u32::from(v);
+            *c += u32::from(v != 0);
         }
     }
     for y in 0..h {
-        for (o, &c) in out[y * w..(y + 1) * w].iter_mut().zip(counts.iter()) {
+        for (o, &c) in cols[y * w..(y + 1) * w].iter_mut().zip(counts.iter()) {
             *o = u8::from(c > 0);
         }
         if y + radius + 1 < h {
-            let add = &rows[(y + radius + 1) * w..(y + radius + 2) * w];
+            let add = &src[(y + radius + 1) * w..(y + radius + 2) * w];
             for (c, &v) in counts.iter_mut().zip(add) {
-                *c += u32::from(v);
+                *c += u32::from(v != 0);
             }
         }
         if y >= radius {
-            let sub = &rows[(y - radius) * w..(y - radius + 1) * w];
+            let sub = &src[(y - radius) * w..(y - radius + 1) * w];
             for (c, &v) in counts.iter_mut().zip(sub) {
-                *c -= u32::from(v);
+                *c -= u32::from(v != 0);
             }
+        }
+    }
+    // Rows: each run of set pixels [start, end) fills [start − r, end + r), every pixel once.
+    for (s, d) in cols.chunks_exact(w).zip(out.chunks_exact_mut(w)) {
+        let (mut x, mut filled) = (0, 0);
+        while x < w {
+            // Skip zeros eight at a time.
+            while let Some(word) = s.get(x..x + 8)
+                && word.iter().all(|&v| v == 0)
+            {
+                x += 8;
+            }
+            while x < w && s[x] == 0 {
+                x += 1;
+            }
+            if x == w {
+                break;
+            }
+            let start = x;
+            while x < w && s[x] != 0 {
+                x += 1;
+            }
+            let (lo, hi) = (
+                start.saturating_sub(radius).max(filled),
+                (x + radius).min(w),
+            );
+            d[lo..hi].fill(1);
+            filled = hi;
         }
     }
     Ok(())
@@ -297,8 +310,7 @@ pub fn dilate_mask(
 /// Buffers of [`dilate_mask`] (reused between frames).
 #[derive(Debug, Clone, Default)]
 pub struct DilateScratch {
-    rows: Vec<u8>,
-    prefix: Vec<u32>,
+    cols: Vec<u8>,
     counts: Vec<u32>,
 }
 
