@@ -40,11 +40,37 @@ pub fn parse_c3d(path: &Path, bytes: &[u8], wanted: Option<&[String]>) -> Result
     // The data section must start after the parameter section; c3dio underflows on a data start
     // block of 0 or 1. Header words are little-endian except on MIPS (processor byte 86).
     let processor = bytes.get((param_block - 1) * 512 + 3).copied();
-    let data_block = if processor == Some(86) {
-        u16::from_be_bytes([bytes[16], bytes[17]])
-    } else {
-        u16::from_le_bytes([bytes[16], bytes[17]])
+    let word = |i: usize| {
+        let b = [bytes[2 * i], bytes[2 * i + 1]];
+        if processor == Some(86) {
+            u16::from_be_bytes(b)
+        } else {
+            u16::from_le_bytes(b)
+        }
     };
+    let data_block = word(8);
+    // The frame range: c3dio overflows when the last frame precedes the first, and allocates
+    // frames × markers cells before it reads them, so the data section must be able to hold
+    // them (at least 8 bytes a cell: four 16-bit integers).
+    let (markers, first, last) = (word(1), word(3), word(4));
+    if last < first {
+        return Err(Error::invalid(
+            path,
+            format!("malformed C3D header: the last frame ({last}) precedes the first ({first})"),
+        ));
+    }
+    let cells = (usize::from(last - first) + 1) * usize::from(markers);
+    if cells.saturating_mul(8) > bytes.len() {
+        return Err(Error::invalid(
+            path,
+            format!(
+                "truncated C3D file: the header promises {} frames of {markers} markers, more \
+                 than its {} bytes can hold",
+                usize::from(last - first) + 1,
+                bytes.len()
+            ),
+        ));
+    }
     if usize::from(data_block) <= param_block {
         return Err(Error::invalid(
             path,
@@ -492,5 +518,32 @@ mod tests {
                 .to_string();
             assert!(msg.contains("bad.c3d"), "{block}: {msg}");
         }
+    }
+
+    /// The frame range of the header is checked before c3dio allocates or subtracts with it
+    /// (fuzz crashes: last frame before the first, and frames × markers beyond the file).
+    #[test]
+    fn frame_range_beyond_reason_is_an_error() {
+        let labels = vec!["M0".to_string()];
+        let frames = vec![vec![Some([0.0_f32, 1.0, 2.0])]; 3];
+        let good = write_c3d(&labels, "mm", 100.0, 1, &frames);
+        let set = |b: &mut Vec<u8>, word: usize, v: u16| {
+            b[2 * word..2 * word + 2].copy_from_slice(&v.to_le_bytes());
+        };
+        let mut back = good.clone();
+        set(&mut back, 3, u16::MAX);
+        set(&mut back, 4, 1);
+        let msg = super::parse_c3d(Path::new("back.c3d"), &back, None)
+            .expect_err("accepted")
+            .to_string();
+        assert!(msg.contains("back.c3d") && msg.contains("precedes"), "{msg}");
+        let mut huge = good;
+        set(&mut huge, 1, u16::MAX);
+        set(&mut huge, 3, 1);
+        set(&mut huge, 4, u16::MAX);
+        let msg = super::parse_c3d(Path::new("huge.c3d"), &huge, None)
+            .expect_err("accepted")
+            .to_string();
+        assert!(msg.contains("huge.c3d") && msg.contains("more than its"), "{msg}");
     }
 }
