@@ -20,7 +20,7 @@ use crate::config::TrackConfig;
 use crate::demo::train_generator_model;
 use crate::error::{Error, Result};
 use crate::motion::ACTIONS;
-use crate::scene::{Scene, default_scene, look_at, render_camera};
+use crate::scene::{Scene, default_scene, look_at};
 use crate::session::Session;
 use crate::synth::{MotionSource, random_targets, scene_synth, sequence};
 
@@ -159,8 +159,7 @@ pub fn bench_scene(width: u32, height: u32, views: usize) -> Result<Scene> {
             .ok_or_else(|| Error::Config("bench: degenerate camera".into()))?;
         let mut cam = first.clone();
         cam.name = format!("camera{v}");
-        cam.r_cw = r_cw;
-        cam.t_cw = t_cw;
+        cam.set_pose((r_cw, t_cw));
         scene.cameras.push(cam);
     }
     Ok(scene)
@@ -225,7 +224,7 @@ pub fn prepare(opts: &BenchOptions, n_frames: usize) -> Result<Prepared> {
     }
     poses.truncate(n_frames.max(1));
     let synth: SceneSynth = scene_synth(&scene, lengths);
-    let cams: Vec<_> = scene.cameras.iter().map(render_camera).collect();
+    let cams: Vec<_> = scene.cameras.iter().map(|c| c.model.clone()).collect();
     let frames = poses
         .par_iter()
         .enumerate()
@@ -358,7 +357,7 @@ mod tests {
     fn scene_views_and_memory() {
         let s = bench_scene(160, 120, 3).unwrap();
         assert_eq!(s.cameras.len(), 3);
-        assert_ne!(s.cameras[1].t_cw, s.cameras[0].t_cw);
+        assert_ne!(s.cameras[1].t_cw(), s.cameras[0].t_cw());
         if cfg!(target_os = "linux") {
             let (rss, hwm) = memory_kib();
             assert!(rss.unwrap() > 0 && hwm.unwrap() >= rss.unwrap());

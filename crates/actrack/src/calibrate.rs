@@ -159,18 +159,13 @@ impl Intrinsics {
     }
 
     fn camera(&self, width: u32, height: u32, r_cw: Matrix3<f64>, t_cw: Vector3<f64>) -> Camera {
-        Camera {
-            name: "camera0".into(),
-            width,
-            height,
-            fx: self.fx,
-            fy: self.fy,
-            cx: self.cx,
-            cy: self.cy,
-            distortion: self.distortion,
-            r_cw,
-            t_cw,
-        }
+        Camera::new(
+            "camera0",
+            (width, height),
+            [self.fx, self.fy, self.cx, self.cy],
+            self.distortion,
+            (r_cw, t_cw),
+        )
     }
 }
 
@@ -691,7 +686,7 @@ pub fn calibrate(input: &CalibrationInput) -> Result<Calibration> {
     let camera = input.intrinsics.camera(input.width, input.height, r, t);
     // The table must be in front of the camera and seen from above.
     for (i, x) in world.iter().enumerate() {
-        if camera.to_camera(x).z <= 0.01 {
+        if camera.model.to_camera(x).z <= 0.01 {
             return Err(Error::Config(format!(
                 "corner {} of the table ends up behind the camera: check the corners and the \
                  intrinsics",
@@ -738,7 +733,7 @@ pub fn calibrate(input: &CalibrationInput) -> Result<Calibration> {
              the shoulder height or the person's height and the table height)"
         )));
     }
-    let render = crate::scene::render_camera(&camera);
+    let render = camera.model.clone();
     let [su, sv] = input.shoulder_px;
     let z_shoulder = input.table_height + above;
     let ray = render
@@ -848,7 +843,7 @@ pub fn draw_preview(
         world_line(img, cam, &o, &(o + axis * 0.2), c);
     }
     let mut pose = scene.pose_to_world(rest_pose_actor);
-    let render_cam = crate::scene::render_camera(cam);
+    let render_cam = cam.model.clone();
     let geometry = crate::scene::render_arm(scene, lengths);
     actrack_render::correct_arm(&geometry, &mut pose, None);
     let contour = actrack_render::contour_points(

@@ -311,7 +311,7 @@ impl TrackWriter {
         ];
         for c in &s.cameras {
             tf.push(json!({"timestamp": time(t), "parent_frame_id": "world", "child_frame_id": c.name,
-                           "translation": vec3(&c.centre()), "rotation": quat(&c.r_cw.transpose())}));
+                           "translation": vec3(&c.centre()), "rotation": quat(&c.r_cw().transpose())}));
         }
         json!({ "transforms": tf })
     }
@@ -359,9 +359,9 @@ impl TrackWriter {
                 let msg = json!({"timestamp": time(t), "frame_id": cam.name, "format": "png", "data": base64(png)});
                 self.put(self.ch.image, t, &msg)?;
             }
-            let (fx, fy, cx, cy) = (cam.fx, cam.fy, cam.cx, cam.cy);
-            let calib = json!({"timestamp": time(t), "frame_id": cam.name, "width": cam.width, "height": cam.height,
-                "distortion_model": "plumb_bob", "D": cam.distortion,
+            let (fx, fy, cx, cy) = (cam.model.fx, cam.model.fy, cam.model.cx, cam.model.cy);
+            let calib = json!({"timestamp": time(t), "frame_id": cam.name, "width": cam.model.width, "height": cam.model.height,
+                "distortion_model": "plumb_bob", "D": cam.model.distortion,
                 "K": [fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0],
                 "R": [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
                 "P": [fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0]});

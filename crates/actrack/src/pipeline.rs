@@ -19,7 +19,7 @@ use crate::error::{Error, Result};
 use crate::frames::{Frame, FrameSource};
 use crate::mcap_out::{EstimateMsg, FrameRecord, TrackWriter};
 use crate::model::ActionModel;
-use crate::scene::{Scene, render_camera};
+use crate::scene::Scene;
 use crate::session::{FrameResult, PoseReport, Session};
 use crate::track_csv::{TrajRow, Trajectory};
 
@@ -333,7 +333,7 @@ pub fn track(
     let mut sink = Sink {
         scene,
         names: &names,
-        cam0: render_camera(&scene.cameras[0]),
+        cam0: scene.cameras[0].model.clone(),
         geometry: session.geometry().clone(),
         contour: config.observation.contour.into(),
         outputs,

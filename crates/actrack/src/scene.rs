@@ -265,29 +265,14 @@ impl Default for EdgeSettings {
     }
 }
 
-/// A validated pinhole camera (SPEC §4.5).
+/// A camera of the scene: the calibrated pinhole camera the renderer projects with (SPEC §4.5)
+/// and its name, the frame id of its views in the MCAP track.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Camera {
     /// Name, used as the MCAP frame id.
     pub name: String,
-    /// Width in pixels.
-    pub width: u32,
-    /// Height in pixels.
-    pub height: u32,
-    /// Focal length u.
-    pub fx: f64,
-    /// Focal length v.
-    pub fy: f64,
-    /// Principal point u.
-    pub cx: f64,
-    /// Principal point v.
-    pub cy: f64,
-    /// Brown distortion (k1, k2, p1, p2, k3).
-    pub distortion: [f64; 5],
-    /// World → camera rotation.
-    pub r_cw: Matrix3<f64>,
-    /// World → camera translation.
-    pub t_cw: Vector3<f64>,
+    /// Size, intrinsics, distortion and world → camera pose.
+    pub model: actrack_render::Camera,
 }
 
 impl Camera {
@@ -300,51 +285,84 @@ impl Camera {
         f: f64,
         (r_cw, t_cw): (Matrix3<f64>, Vector3<f64>),
     ) -> Self {
+        Self::new(
+            name,
+            (width, height),
+            [
+                f,
+                f,
+                (f64::from(width) - 1.0) / 2.0,
+                (f64::from(height) - 1.0) / 2.0,
+            ],
+            [0.0; 5],
+            (r_cw, t_cw),
+        )
+    }
+
+    /// A camera of `width`×`height` pixels with intrinsics `[fx, fy, cx, cy]` (pixels),
+    /// Brown distortion `[k1, k2, p1, p2, k3]` and the world → camera pose (`r_cw`, `t_cw`).
+    pub fn new(
+        name: &str,
+        (width, height): (u32, u32),
+        [fx, fy, cx, cy]: [f64; 4],
+        distortion: [f64; 5],
+        (r_cw, t_cw): (Matrix3<f64>, Vector3<f64>),
+    ) -> Self {
         Self {
             name: name.into(),
-            width,
-            height,
-            fx: f,
-            fy: f,
-            cx: (f64::from(width) - 1.0) / 2.0,
-            cy: (f64::from(height) - 1.0) / 2.0,
-            distortion: [0.0; 5],
-            r_cw,
-            t_cw,
+            model: actrack_render::Camera {
+                width,
+                height,
+                fx,
+                fy,
+                cx,
+                cy,
+                distortion,
+                rotation: [[0.0; 3]; 3],
+                translation: [0.0; 3],
+            },
         }
+        .posed((r_cw, t_cw))
     }
 
-    /// Camera coordinates of a world point.
-    pub fn to_camera(&self, x_w: &Vector3<f64>) -> Vector3<f64> {
-        self.r_cw * x_w + self.t_cw
+    fn posed(mut self, pose: (Matrix3<f64>, Vector3<f64>)) -> Self {
+        self.set_pose(pose);
+        self
     }
 
-    /// Projects a world point to pixel coordinates; `None` when it is less than 1 cm in front.
+    /// Moves the camera to the world → camera pose (`r_cw`, `t_cw`).
+    pub fn set_pose(&mut self, (r_cw, t_cw): (Matrix3<f64>, Vector3<f64>)) {
+        self.model.rotation = [0, 1, 2].map(|i| [r_cw[(i, 0)], r_cw[(i, 1)], r_cw[(i, 2)]]);
+        self.model.translation = [t_cw.x, t_cw.y, t_cw.z];
+    }
+
+    /// World → camera rotation R_cw.
+    pub fn r_cw(&self) -> Matrix3<f64> {
+        self.model.rotation_matrix()
+    }
+
+    /// World → camera translation t_cw.
+    pub fn t_cw(&self) -> Vector3<f64> {
+        self.model.translation_vector()
+    }
+
+    /// Projects a world point to pixel coordinates (with distortion); `None` when it is less
+    /// than 1 cm in front of the camera.
     pub fn project(&self, x_w: &Vector3<f64>) -> Option<(f64, f64)> {
-        let c = self.to_camera(x_w);
-        if c.z <= 0.01 {
-            return None;
-        }
-        let (x, y) = (c.x / c.z, c.y / c.z);
-        let [k1, k2, p1, p2, k3] = self.distortion;
-        let r2 = x * x + y * y;
-        let radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
-        let xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x);
-        let yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y;
-        Some((self.fx * xd + self.cx, self.fy * yd + self.cy))
+        self.model.project(x_w).map(|p| (p.x, p.y))
     }
 
     /// `true` when (u, v) lies on the image.
     pub fn in_image(&self, u: f64, v: f64) -> bool {
         u >= -0.5
             && v >= -0.5
-            && u < f64::from(self.width) - 0.5
-            && v < f64::from(self.height) - 0.5
+            && u < f64::from(self.model.width) - 0.5
+            && v < f64::from(self.model.height) - 0.5
     }
 
     /// Camera centre in the world.
     pub fn centre(&self) -> Vector3<f64> {
-        -(self.r_cw.transpose() * self.t_cw)
+        self.model.center()
     }
 }
 
@@ -535,23 +553,23 @@ impl Scene {
                 .cameras
                 .iter()
                 .map(|c| {
-                    let r = c.r_cw;
+                    let m = &c.model;
                     let nz = |x: f64| (x != 0.0).then_some(x);
                     CameraToml {
                         name: Some(c.name.clone()),
-                        width: c.width,
-                        height: c.height,
-                        fx: c.fx,
-                        fy: c.fy,
-                        cx: c.cx,
-                        cy: c.cy,
-                        k1: nz(c.distortion[0]),
-                        k2: nz(c.distortion[1]),
-                        p1: nz(c.distortion[2]),
-                        p2: nz(c.distortion[3]),
-                        k3: nz(c.distortion[4]),
-                        rotation: Some([0, 1, 2].map(|i| [r[(i, 0)], r[(i, 1)], r[(i, 2)]])),
-                        translation: Some([c.t_cw.x, c.t_cw.y, c.t_cw.z]),
+                        width: m.width,
+                        height: m.height,
+                        fx: m.fx,
+                        fy: m.fy,
+                        cx: m.cx,
+                        cy: m.cy,
+                        k1: nz(m.distortion[0]),
+                        k2: nz(m.distortion[1]),
+                        p1: nz(m.distortion[2]),
+                        p2: nz(m.distortion[3]),
+                        k3: nz(m.distortion[4]),
+                        rotation: Some(m.rotation),
+                        translation: Some(m.translation),
                         ..CameraToml::default()
                     }
                 })
@@ -823,18 +841,13 @@ fn camera_from_toml(c: &CameraToml, i: usize, path: &Path) -> Result<Camera> {
     if !finite(&distortion) {
         return Err(bad("k1/k2/p1/p2/k3", "must be finite"));
     }
-    Ok(Camera {
-        name: c.name.clone().unwrap_or_else(|| format!("camera{i}")),
-        width: c.width,
-        height: c.height,
-        fx: c.fx,
-        fy: c.fy,
-        cx: c.cx,
-        cy: c.cy,
+    Ok(Camera::new(
+        &c.name.clone().unwrap_or_else(|| format!("camera{i}")),
+        (c.width, c.height),
+        [c.fx, c.fy, c.cx, c.cy],
         distortion,
-        r_cw,
-        t_cw,
-    })
+        (r_cw, t_cw),
+    ))
 }
 
 /// A default synthetic scene: a 60 × 24 cm table region at 0.75 m, the actor's shoulder 0.35 m
@@ -870,22 +883,6 @@ pub fn default_scene(width: u32, height: u32) -> Scene {
             tau: 0.05,
             ..EdgeSettings::default()
         },
-    }
-}
-
-/// Converts a scene camera to the renderer's.
-pub fn render_camera(c: &Camera) -> actrack_render::Camera {
-    let r = c.r_cw;
-    actrack_render::Camera {
-        width: c.width,
-        height: c.height,
-        fx: c.fx,
-        fy: c.fy,
-        cx: c.cx,
-        cy: c.cy,
-        distortion: c.distortion,
-        rotation: [0, 1, 2].map(|i| [r[(i, 0)], r[(i, 1)], r[(i, 2)]]),
-        translation: [c.t_cw.x, c.t_cw.y, c.t_cw.z],
     }
 }
 
@@ -950,7 +947,7 @@ origin = [0.1, 0.0, 1.1]
         assert!((u - 159.5).abs() < 1e-9 && (v - 119.5).abs() < 1e-9);
         // Roundtrip through the TOML writer.
         let s2 = Scene::parse(&s.to_toml_string(), Path::new("s2.toml")).unwrap();
-        assert!((s2.cameras[0].r_cw - c.r_cw).abs().max() < 1e-12);
+        assert!((s2.cameras[0].r_cw() - c.r_cw()).abs().max() < 1e-12);
         let (ctr, h) = s.theta_region();
         assert!((ctr[0] + 0.1).abs() < 1e-12 && (ctr[1] - 0.5).abs() < 1e-12);
         assert!((h[0] - 0.4).abs() < 1e-12 && (h[1] - 0.15).abs() < 1e-12);
@@ -973,7 +970,7 @@ origin = [0.1, 0.0, 1.1]
                 ..Default::default()
             };
             f(&mut c);
-            camera_from_toml(&c, 0, Path::new("x")).unwrap().r_cw
+            camera_from_toml(&c, 0, Path::new("x")).unwrap().r_cw()
         };
         let a = mk(&|c| c.rotation = Some(rows));
         let b = mk(&|c| c.axis_angle = Some([0.3, -0.2, 0.1]));

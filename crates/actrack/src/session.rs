@@ -32,7 +32,7 @@ use crate::model::ActionModel;
 use crate::observation::{
     FingertipFloor, Floor, SceneObservation, Scorer, ShortContourPenalty, Timed,
 };
-use crate::scene::{Scene, render_arm, render_camera};
+use crate::scene::{Scene, render_arm};
 
 /// The filter's causal median window (SPEC §3.7's recommendation, frames) when the reported
 /// pose is the centred median: the causal one still feeds the gate's background.
@@ -180,7 +180,7 @@ impl Session {
             scene,
             [model.arm_lengths.upper_arm, model.arm_lengths.forearm_hand],
         );
-        let cameras: Vec<RenderCamera> = scene.cameras.iter().map(render_camera).collect();
+        let cameras: Vec<RenderCamera> = scene.cameras.iter().map(|c| c.model.clone()).collect();
         let likelihood = LikelihoodModel::new(
             cameras.clone(),
             geometry.clone(),
@@ -304,18 +304,18 @@ impl Session {
         let obs_cfg = &self.config.observation;
         for (v, img) in images.iter().enumerate() {
             let cam = &self.scene.cameras[v];
-            if img.size() != (cam.width, cam.height) {
+            if img.size() != (cam.model.width, cam.model.height) {
                 return Err(Error::Config(format!(
                     "frame {frame}: the image is {}×{} but camera `{}` of the scene is {}×{}",
                     img.size().0,
                     img.size().1,
                     cam.name,
-                    cam.width,
-                    cam.height
+                    cam.model.width,
+                    cam.model.height
                 )));
             }
             let err = |e: actrack_render::RenderError| Error::Config(format!("frame {frame}: {e}"));
-            let params = self.scene.edge_params(cam.width);
+            let params = self.scene.edge_params(cam.model.width);
             let stage = &mut self.views[v];
             if obs_cfg.local_norm.enabled {
                 stage

@@ -16,7 +16,7 @@ use crate::error::{Error, Result};
 use crate::model::ActionModel;
 use crate::motion::{MotionParams, generate};
 use crate::scene::Scene;
-use crate::scene::{render_arm, render_camera};
+use crate::scene::render_arm;
 use crate::track_csv::{TrajRow, Trajectory};
 
 /// Where the movements come from.
@@ -146,7 +146,7 @@ pub fn render_frames(
     seed: u64,
 ) -> Result<Vec<RgbImage>> {
     let synth = scene_synth(scene, lengths);
-    let cam = render_camera(&scene.cameras[0]);
+    let cam = scene.cameras[0].model.clone();
     poses_world
         .par_iter()
         .enumerate()

@@ -35,21 +35,21 @@ fn camera(eye: Vector3<f64>, target: Vector3<f64>, f: f64, distortion: [f64; 5])
         f,
         look_at(eye, target, Vector3::z()).unwrap(),
     );
-    c.distortion = distortion;
+    c.model.distortion = distortion;
     c
 }
 
 fn input(cam: &Camera, corners: Vec<[f64; 2]>, shoulder: [f64; 2], above: f64) -> CalibrationInput {
     CalibrationInput {
-        width: cam.width,
-        height: cam.height,
+        width: cam.model.width,
+        height: cam.model.height,
         intrinsics: Intrinsics {
-            fx: cam.fx,
-            fy: cam.fy,
-            cx: cam.cx,
-            cy: cam.cy,
-            distortion: cam.distortion,
-            size: Some((cam.width, cam.height)),
+            fx: cam.model.fx,
+            fy: cam.model.fy,
+            cx: cam.model.cx,
+            cy: cam.model.cy,
+            distortion: cam.model.distortion,
+            size: Some((cam.model.width, cam.model.height)),
         },
         corners,
         table_size: TABLE_SIZE,
@@ -111,7 +111,7 @@ fn recovers_pose_from_exact_corners_on_20_random_placements() {
         };
         let cal = calibrate(&input(&cam, corners, [su, sv], 0.35)).unwrap();
         let got = &cal.scene.cameras[0];
-        let dr = got.r_cw * cam.r_cw.transpose();
+        let dr = got.r_cw() * cam.r_cw().transpose();
         let angle = ((dr.trace() - 1.0) / 2.0)
             .clamp(-1.0, 1.0)
             .acos()
@@ -283,11 +283,11 @@ fn degenerate_input_exits_2_with_a_clear_message() {
         .corners()
         .iter()
         .map(|x| {
-            let xc = away.to_camera(x);
+            let xc = away.model.to_camera(x);
             assert!(xc.z < 0.0);
             [
-                away.fx * xc.x / xc.z + away.cx,
-                away.fy * xc.y / xc.z + away.cy,
+                away.model.fx * xc.x / xc.z + away.model.cx,
+                away.model.fy * xc.y / xc.z + away.model.cy,
             ]
         })
         .collect();

@@ -595,7 +595,7 @@ fn bad_input_names_the_frame_with_exit_code_2() {
     );
     // A camera that does not see the table (moved 5 m behind it).
     let mut blind = actrack::scene::default_scene(160, 120);
-    blind.cameras[0].t_cw.z -= 5.0;
+    blind.cameras[0].model.translation[2] -= 5.0;
     std::fs::write(f.root.join("blind.toml"), blind.to_toml_string()).unwrap();
     let out = Command::new(BIN)
         .args([

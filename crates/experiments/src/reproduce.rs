@@ -27,7 +27,6 @@ use actrack::model::ActionModel;
 use actrack::pipeline::{draw_overlay, track_row};
 use actrack::scene::{
     ArmGeometry, Camera, EdgeSettings, Placement, Scene, Side, TableRegion, look_at, render_arm,
-    render_camera,
 };
 use actrack::session::{PoseReport, Session};
 use actrack::synth::scene_synth;
@@ -525,7 +524,7 @@ pub fn run_video(
     synth.clutter = cond.clutter;
     synth.noise_sigma = cond.noise;
     let geometry = render_arm(scene, lengths);
-    let cams: Vec<_> = scene.cameras.iter().map(render_camera).collect();
+    let cams: Vec<_> = scene.cameras.iter().map(|c| c.model.clone()).collect();
     let mut caches = vec![actrack_render::synth::SynthCache::default(); cams.len()];
     let mut session = Session::new(model, scene, config)?;
     let names = session.action_names().to_vec();

@@ -290,7 +290,7 @@ impl PyScene {
         self.inner
             .cameras
             .iter()
-            .map(|c| (c.width, c.height))
+            .map(|c| (c.model.width, c.model.height))
             .collect()
     }
 

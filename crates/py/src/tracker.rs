@@ -11,7 +11,7 @@ use std::sync::atomic::AtomicBool;
 
 use actrack::frames::{FrameOptions, FrameSource};
 use actrack::pipeline::{TrackOutputs, centred_median as pipeline_centred_median, track};
-use actrack::scene::{edge_params, render_arm, render_camera};
+use actrack::scene::{edge_params, render_arm};
 use actrack::{FrameResult, Session, TrackConfig};
 use actrack_render::{ContourMethod, EdgeImage, EdgeWorkspace, ImageView, LikelihoodModel};
 use image::RgbImage;
@@ -649,7 +649,7 @@ pub fn contour_likelihood<'py>(
     let poses: Vec<[f64; 9]> = (0..p.nrows())
         .map(|i| std::array::from_fn(|c| p[(i, c)]))
         .collect();
-    let cameras = s.cameras.iter().map(render_camera).collect();
+    let cameras = s.cameras.iter().map(|c| c.model.clone()).collect();
     let lik = LikelihoodModel::new(
         cameras,
         render_arm(s, lengths),

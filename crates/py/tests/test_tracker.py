@@ -250,6 +250,37 @@ def test_tracker_steps_match_track_video(model, scene, tmp_path, window):
         np.testing.assert_allclose(pose, [e.best_pose for e in steps], **tol)
 
 
+def test_track_video_and_the_cli_write_the_same_csv(model, scene, tmp_path):
+    """`track_video` and `actrack-cli track` (the binary the Rust tests built beside the
+    wheel) write byte-identical CSV for the same model, scene, video, configuration and seed."""
+    import os
+    import pathlib
+    import subprocess
+
+    root = pathlib.Path(__file__).resolve().parents[3]
+    target = pathlib.Path(os.environ.get("CARGO_TARGET_DIR", root / "target"))
+    cli = next(
+        (p for p in (target / "debug" / "actrack-cli", target / "release" / "actrack-cli") if p.exists()),
+        None,
+    )
+    if cli is None:
+        pytest.skip("actrack-cli is not built (cargo build -p actrack-cli)")
+    frames = synthetic_frames(6)
+    video = tmp_path / "clip.y4m"
+    write_y4m(video, frames, full_range=True)
+    model.save(tmp_path / "model.actrack.json")
+    (tmp_path / "scene.toml").write_text(scene.to_toml())
+    config = tmp_path / "config.toml"
+    config.write_text('[filter]\nparticles = 150\nseed = 5\n\n[output]\nmedian = "causal"\n')
+    actrack.track_video(model, scene, video, csv=tmp_path / "py.csv", config=config)
+    subprocess.run(
+        [str(cli), "track", "--model", "model.actrack.json", "--scene", "scene.toml",
+         "--input", "clip.y4m", "--config", "config.toml", "--csv", "cli.csv"],
+        cwd=tmp_path, check=True, capture_output=True,
+    )
+    assert (tmp_path / "py.csv").read_bytes() == (tmp_path / "cli.csv").read_bytes()
+
+
 def test_track_equals_frame_by_frame_steps(model, scene):
     """`track` gives the estimates of `step` called frame by frame, and frame numbering carries
     on after it."""

@@ -536,7 +536,10 @@ mod tests {
         let msg = super::parse_c3d(Path::new("back.c3d"), &back, None)
             .expect_err("accepted")
             .to_string();
-        assert!(msg.contains("back.c3d") && msg.contains("precedes"), "{msg}");
+        assert!(
+            msg.contains("back.c3d") && msg.contains("precedes"),
+            "{msg}"
+        );
         let mut huge = good;
         set(&mut huge, 1, u16::MAX);
         set(&mut huge, 3, 1);
@@ -544,6 +547,9 @@ mod tests {
         let msg = super::parse_c3d(Path::new("huge.c3d"), &huge, None)
             .expect_err("accepted")
             .to_string();
-        assert!(msg.contains("huge.c3d") && msg.contains("more than its"), "{msg}");
+        assert!(
+            msg.contains("huge.c3d") && msg.contains("more than its"),
+            "{msg}"
+        );
     }
 }
