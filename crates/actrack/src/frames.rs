@@ -49,7 +49,7 @@ pub struct FrameOptions {
 
 enum Inner {
     Dir { files: Vec<PathBuf>, next: usize },
-    Y4m(Box<Y4mReader>, Option<Child>),
+    Y4m(Box<Y4mReader>, Option<Ffmpeg>),
     Live(Live),
 }
 
@@ -91,12 +91,12 @@ struct LiveShared {
 /// A y4m stream read by its own thread, newest frame wins.
 struct Live {
     shared: Arc<LiveShared>,
-    child: Option<Child>,
+    child: Option<Ffmpeg>,
     taken: usize,
 }
 
 impl Live {
-    fn start(mut reader: Y4mReader, child: Option<Child>) -> Self {
+    fn start(mut reader: Y4mReader, child: Option<Ffmpeg>) -> Self {
         let shared = Arc::new(LiveShared::default());
         let theirs = Arc::clone(&shared);
         // The thread ends at the end of the stream, or when the decoder is killed on drop; a
@@ -146,7 +146,7 @@ impl Live {
                 Some(Ok(())) => {
                     drop(slot);
                     if let Some(c) = self.child.as_mut() {
-                        finish_ffmpeg(c, name, self.shared.stats.received())?;
+                        c.finish(name, self.shared.stats.received(), false)?;
                     }
                     if self.taken == 0 {
                         return Err(Error::invalid(
@@ -159,8 +159,7 @@ impl Live {
                 Some(Err(msg)) => {
                     drop(slot);
                     if let Some(c) = self.child.as_mut() {
-                        let _ = c.kill();
-                        let _ = c.wait();
+                        c.stop();
                     }
                     return Err(Error::invalid(name, msg));
                 }
@@ -179,8 +178,7 @@ impl Live {
 impl Drop for Live {
     fn drop(&mut self) {
         if let Some(child) = &mut self.child {
-            let _ = child.kill();
-            let _ = child.wait();
+            child.stop();
         }
     }
 }
@@ -340,7 +338,7 @@ impl FrameSource {
                         Ok(Some(img)) => (index, Ok(img)),
                         Ok(None) => {
                             if let Some(c) = child.as_mut() {
-                                finish_ffmpeg(c, &self.name, index)?;
+                                c.finish(&self.name, index, self.skip_bad)?;
                             }
                             if index == 0 {
                                 return Err(Error::invalid(
@@ -353,8 +351,7 @@ impl FrameSource {
                         Err(msg) => {
                             // A truncated stream cannot be resynchronised: always an error.
                             if let Some(c) = child.as_mut() {
-                                let _ = c.kill();
-                                let _ = c.wait();
+                                c.stop();
                             }
                             return Err(Error::invalid(
                                 &self.name,
@@ -419,8 +416,7 @@ impl FrameSource {
 impl Drop for FrameSource {
     fn drop(&mut self) {
         if let Inner::Y4m(_, Some(child)) = &mut self.inner {
-            let _ = child.kill();
-            let _ = child.wait();
+            child.stop();
         }
     }
 }
@@ -461,7 +457,7 @@ pub fn list_images(dir: &Path) -> Result<Vec<PathBuf>> {
     Ok(files)
 }
 
-fn spawn_ffmpeg(input: &Path, device: bool) -> Result<(Y4mReader, Child)> {
+fn spawn_ffmpeg(input: &Path, device: bool) -> Result<(Y4mReader, Ffmpeg)> {
     let mut cmd = Command::new("ffmpeg");
     cmd.args(["-hide_banner", "-loglevel", "error", "-nostdin"]);
     if device {
@@ -496,15 +492,13 @@ fn spawn_ffmpeg(input: &Path, device: bool) -> Result<(Y4mReader, Child)> {
     let Some(out) = child.stdout.take() else {
         return Err(Error::invalid(input, "ffmpeg: no output pipe"));
     };
+    let mut child = Ffmpeg::new(child);
     match Y4mReader::new(Box::new(BufReader::new(out)), input) {
         Ok(r) => Ok((r, child)),
         Err(e) => {
-            let _ = child.kill();
-            let status = child.wait();
-            let mut msg = String::new();
-            if let Some(mut s) = child.stderr.take() {
-                let _ = s.read_to_string(&mut msg);
-            }
+            let _ = child.child.kill();
+            let status = child.child.wait();
+            let msg = child.errors();
             if msg.trim().is_empty() {
                 Err(e)
             } else {
@@ -518,19 +512,67 @@ fn spawn_ffmpeg(input: &Path, device: bool) -> Result<(Y4mReader, Child)> {
     }
 }
 
-fn finish_ffmpeg(child: &mut Child, input: &Path, frames: usize) -> Result<()> {
-    let status = child.wait().map_err(|e| Error::read(input, e))?;
-    if status.success() {
-        return Ok(());
+/// A running ffmpeg decoder and the thread that collects its error output (drained as it
+/// comes, so that a stream of decoding errors cannot fill the pipe and stall the frames).
+struct Ffmpeg {
+    child: Child,
+    errors: Option<std::thread::JoinHandle<String>>,
+}
+
+impl Ffmpeg {
+    fn new(mut child: Child) -> Self {
+        let errors = child.stderr.take().map(|mut s| {
+            std::thread::spawn(move || {
+                let mut msg = String::new();
+                let _ = s.read_to_string(&mut msg);
+                msg
+            })
+        });
+        Self { child, errors }
     }
-    let mut msg = String::new();
-    if let Some(mut s) = child.stderr.take() {
-        let _ = s.read_to_string(&mut msg);
+
+    /// What ffmpeg wrote to its error output (after it exited).
+    fn errors(&mut self) -> String {
+        self.errors
+            .take()
+            .and_then(|h| h.join().ok())
+            .unwrap_or_default()
     }
-    Err(Error::invalid(
-        input,
-        format!("ffmpeg failed after {frames} frames: {}", msg.trim()),
-    ))
+
+    fn stop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+
+    /// At the end of the stream after `frames` frames: an error when ffmpeg failed, or when it
+    /// reported decoding errors (a video cut short or damaged decodes "successfully" up to the
+    /// break), unless `tolerate` (skipping bad frames was asked for).
+    fn finish(&mut self, input: &Path, frames: usize, tolerate: bool) -> Result<()> {
+        let status = self.child.wait().map_err(|e| Error::read(input, e))?;
+        let msg = self.errors();
+        let first: Vec<&str> = msg
+            .lines()
+            .filter(|l| !l.trim().is_empty())
+            .take(3)
+            .collect();
+        if !status.success() {
+            return Err(Error::invalid(
+                input,
+                format!("ffmpeg failed after {frames} frames: {}", first.join("; ")),
+            ));
+        }
+        if !first.is_empty() && !tolerate {
+            return Err(Error::invalid(
+                input,
+                format!(
+                    "ffmpeg reported decoding errors, so the video is cut short or damaged; \
+                     {frames} frames were decoded: {}",
+                    first.join("; ")
+                ),
+            ));
+        }
+        Ok(())
+    }
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

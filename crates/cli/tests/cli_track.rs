@@ -332,6 +332,65 @@ fn mp4_through_ffmpeg() {
     assert_eq!(rows, n);
 }
 
+/// A video cut in half decodes "successfully" through ffmpeg up to the cut (exit 0, errors on
+/// its error output): `track` keeps the frames before the break, says where it stopped and exits
+/// with code 2; with `--skip-bad-frames` it keeps them and succeeds.
+#[test]
+fn mp4_cut_in_half_is_reported() {
+    let f = fixture();
+    if Command::new("ffmpeg").arg("-version").output().is_err() {
+        eprintln!("note: ffmpeg is not installed; the test is skipped");
+        return;
+    }
+    let mp4 = f.root.join("whole.mp4");
+    let st = Command::new("ffmpeg")
+        .args(["-v", "error", "-y", "-framerate", "30", "-i"])
+        .arg(f.root.join("video/frames/frame_%05d.png"))
+        .args(["-c:v", "libx264", "-pix_fmt", "yuv420p", "-crf", "12"])
+        .args(["-movflags", "+faststart"])
+        .arg(&mp4)
+        .status()
+        .unwrap();
+    if !st.success() {
+        eprintln!("note: this ffmpeg cannot encode H.264; the test is skipped");
+        return;
+    }
+    let bytes = std::fs::read(&mp4).unwrap();
+    std::fs::write(f.root.join("half.mp4"), &bytes[..bytes.len() / 2]).unwrap();
+    let n = std::fs::read_dir(f.root.join("video/frames"))
+        .unwrap()
+        .count();
+    let rows = |name: &str| {
+        std::fs::read_to_string(f.root.join(name))
+            .unwrap()
+            .lines()
+            .filter(|l| !l.starts_with('#'))
+            .count()
+            - 1
+    };
+    let out = track(&f.root, "half.mp4", &["--csv", "half.csv"], None);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("half.mp4") && err.contains("cut short"),
+        "{err}"
+    );
+    let kept = rows("half.csv");
+    assert!(kept > 0 && kept < n, "{kept} of {n} frames");
+    let out = track(
+        &f.root,
+        "half.mp4",
+        &["--csv", "half2.csv", "--skip-bad-frames"],
+        None,
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(rows("half2.csv"), kept);
+}
+
 /// A camera stand-in: ffmpeg plays a y4m file paced in time (`-readrate 4`, four times its rate)
 /// into `track --input - --live`, which keeps up or drops frames and says how many.
 #[test]

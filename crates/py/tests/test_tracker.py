@@ -124,7 +124,7 @@ def test_config_sources(model, scene, tmp_path):
     )
     c = t.config_dict
     assert c["filter"]["particles"] == 64 and c["filter"]["speed_range"] == [0.5, 2.0]
-    assert c["output"] == {"median": "causal", "median_window": 3}
+    assert c["output"] == {"median": "causal", "median_window": 3, "mcap_particles": 400}
     assert c["observation"]["gamma"] == 1.0 and c["observation"]["contour"] == "raster"
     assert c["observation"]["foreground_gate"]["enabled"] is True
     assert c["actor"]["fingertip_floor"] == -0.3
