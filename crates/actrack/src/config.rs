@@ -746,6 +746,37 @@ impl TrackConfig {
 mod tests {
     use super::*;
 
+    /// The dotted keys of a TOML table (`filter.particles`, …).
+    fn keys(prefix: &str, t: &toml::Table, out: &mut Vec<String>) {
+        for (k, v) in t {
+            let key = if prefix.is_empty() {
+                k.clone()
+            } else {
+                format!("{prefix}.{k}")
+            };
+            match v {
+                toml::Value::Table(sub) => keys(&key, sub, out),
+                _ => out.push(key),
+            }
+        }
+    }
+
+    /// docs/configuration.md has one row per key of `TrackConfig`, and no other.
+    #[test]
+    fn the_reference_lists_every_key() {
+        let doc = include_str!("../../../docs/configuration.md");
+        let documented: std::collections::BTreeSet<&str> = doc
+            .lines()
+            .filter_map(|l| l.strip_prefix("| `"))
+            .filter_map(|l| l.split('`').next())
+            .collect();
+        let table: toml::Table = toml::from_str(&TrackConfig::default().to_toml()).unwrap();
+        let mut all = Vec::new();
+        keys("", &table, &mut all);
+        let all: std::collections::BTreeSet<&str> = all.iter().map(String::as_str).collect();
+        assert_eq!(documented, all, "docs/configuration.md against TrackConfig");
+    }
+
     #[test]
     fn the_default_preset_is_the_default() {
         assert_eq!(
