@@ -520,6 +520,27 @@ mod tests {
         }
     }
 
+    /// The fuzzers' C3D seeds, among them inputs on which c3dio panics (an i8 group-id counter
+    /// that overflows): each is refused with an error naming the file, never a panic.
+    #[test]
+    fn fuzz_seeds_are_errors_not_panics() {
+        for (name, bytes) in [
+            (
+                "group_id_127.c3d",
+                &include_bytes!("../../../../fuzz/corpus/c3d/group_id_127.c3d")[..],
+            ),
+            (
+                "last_frame_before_first.c3d",
+                &include_bytes!("../../../../fuzz/corpus/c3d/last_frame_before_first.c3d")[..],
+            ),
+        ] {
+            let msg = super::parse_c3d(Path::new(name), bytes, None)
+                .expect_err("accepted")
+                .to_string();
+            assert!(msg.contains(name), "{msg}");
+        }
+    }
+
     /// The frame range of the header is checked before c3dio allocates or subtracts with it
     /// (fuzz crashes: last frame before the first, and frames × markers beyond the file).
     #[test]
