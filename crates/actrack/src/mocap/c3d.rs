@@ -520,8 +520,9 @@ mod tests {
         }
     }
 
-    /// The fuzzers' C3D seeds, among them inputs on which c3dio panics (an i8 group-id counter
-    /// that overflows): each is refused with an error naming the file, never a panic.
+    /// The fuzzers' C3D crash inputs (c3dio overflows: an i8 group-id counter, a parameter's
+    /// dimension product; a frame range that we check first): each is refused with an error
+    /// naming the file, never a panic.
     #[test]
     fn fuzz_seeds_are_errors_not_panics() {
         for (name, bytes) in [
@@ -532,6 +533,10 @@ mod tests {
             (
                 "last_frame_before_first.c3d",
                 &include_bytes!("../../../../fuzz/corpus/c3d/last_frame_before_first.c3d")[..],
+            ),
+            (
+                "dimension_product_overflow.c3d",
+                &include_bytes!("../../../../fuzz/corpus/c3d/dimension_product_overflow.c3d")[..],
             ),
         ] {
             let msg = super::parse_c3d(Path::new(name), bytes, None)
