@@ -30,6 +30,7 @@ fn run() -> actrack::eval::EvalReport {
     config.filter.seed = 3;
     let outputs = TrackOutputs {
         mcap: Some(dir.path().join("t.mcap")),
+        keep_trajectory: true,
         ..TrackOutputs::default()
     };
     let summary = track(

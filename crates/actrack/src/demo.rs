@@ -286,6 +286,7 @@ pub fn run_demo(
         mcap_images: false,
         csv: Some(csv.clone()),
         overlay: None,
+        keep_trajectory: true,
     };
     let summary = track(
         &model,

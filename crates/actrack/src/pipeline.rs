@@ -21,7 +21,7 @@ use crate::mcap_out::{EstimateMsg, FrameRecord, TrackWriter};
 use crate::model::ActionModel;
 use crate::scene::Scene;
 use crate::session::{FrameResult, PoseReport, Session};
-use crate::track_csv::{TrajRow, Trajectory};
+use crate::track_csv::{TrajRow, Trajectory, TrajectoryWriter};
 
 /// Sets the number of worker threads of the global pool (once, before any tracking).
 pub fn set_threads(n: usize) -> Result<()> {
@@ -45,6 +45,9 @@ pub struct TrackOutputs {
     pub csv: Option<PathBuf>,
     /// A directory for overlay PNGs.
     pub overlay: Option<PathBuf>,
+    /// Keep every row in [`TrackSummary::trajectory`] (memory grows with the video; the CSV is
+    /// written row by row either way).
+    pub keep_trajectory: bool,
 }
 
 /// What [`track`] did.
@@ -64,7 +67,8 @@ pub struct TrackSummary {
     /// The input broke off (a truncated stream, a failing decoder): why and where. The outputs
     /// are finished and hold every frame tracked before.
     pub stopped: Option<String>,
-    /// The trajectory (tracker-output rows).
+    /// The trajectory (tracker-output rows) when [`TrackOutputs::keep_trajectory`] asked for
+    /// it, else empty.
     pub trajectory: Trajectory,
 }
 
@@ -149,15 +153,22 @@ struct Sink<'a> {
     contour: ContourMethod,
     outputs: &'a TrackOutputs,
     writer: Option<TrackWriter>,
+    csv: Option<TrajectoryWriter>,
     traj: Trajectory,
+    frames: usize,
 }
 
 impl Sink<'_> {
     fn write(&mut self, t: &Tracked) -> Result<()> {
         let (frame, r, outputs) = (&t.frame, &t.r, self.outputs);
-        self.traj
-            .rows
-            .push(track_row(frame.index, frame.time, self.names, r));
+        let row = track_row(frame.index, frame.time, self.names, r);
+        if let Some(csv) = self.csv.as_mut() {
+            csv.push(&row)?;
+        }
+        if outputs.keep_trajectory {
+            self.traj.rows.push(row);
+        }
+        self.frames += 1;
         let need_contour =
             outputs.overlay.is_some() || (self.writer.is_some() && outputs.mcap_images);
         let contour = if need_contour {
@@ -338,10 +349,15 @@ pub fn track(
         contour: config.observation.contour.into(),
         outputs,
         writer,
+        csv: match &outputs.csv {
+            Some(p) => Some(TrajectoryWriter::create(p, &config.to_comment(), &names)?),
+            None => None,
+        },
         traj: Trajectory {
             actions: names.clone(),
             rows: Vec::new(),
         },
+        frames: 0,
     };
     let mut report = PoseReport::new(&config.output)?;
     let total = source.len_hint();
@@ -391,23 +407,29 @@ pub fn track(
         if let Some((mut t, pose)) = report.push(t, best, causal) {
             t.r.smoothed_world = scene.pose_to_world(&pose);
             sink.write(&t)?;
-            progress(sink.traj.rows.len(), total);
+            progress(sink.frames, total);
         }
     }
     for (mut t, pose) in report.finish() {
         t.r.smoothed_world = scene.pose_to_world(&pose);
         sink.write(&t)?;
-        progress(sink.traj.rows.len(), total);
+        progress(sink.frames, total);
     }
-    let Sink { writer, traj, .. } = sink;
+    let Sink {
+        writer,
+        csv,
+        traj,
+        frames,
+        ..
+    } = sink;
     if let Some(w) = writer {
         w.finish()?;
     }
-    if let Some(p) = &outputs.csv {
-        traj.save_with_comment(p, &config.to_comment())?;
+    if let Some(csv) = csv {
+        csv.finish()?;
     }
     Ok(TrackSummary {
-        frames: traj.rows.len(),
+        frames,
         seconds: start.elapsed().as_secs_f64(),
         filter_seconds,
         interrupted,

@@ -85,32 +85,9 @@ impl Trajectory {
     /// Writes the CSV to `out`.
     pub fn write_to<W: Write>(&self, mut out: W) -> std::io::Result<()> {
         let track = self.is_track();
-        let mut header: Vec<String> = BASE_COLUMNS.iter().map(|s| (*s).to_string()).collect();
-        if track {
-            header.extend(self.actions.iter().map(|a| format!("p_{a}")));
-            header.extend(["theta_u_std", "theta_v_std", "entropy", "ess"].map(String::from));
-        }
-        writeln!(out, "{}", header.join(","))?;
+        write_header(&mut out, &self.actions, track)?;
         for r in &self.rows {
-            let mut f = vec![
-                r.frame.to_string(),
-                format!("{:.6}", r.time),
-                r.action.clone(),
-                fmt(r.theta[0]),
-                fmt(r.theta[1]),
-            ];
-            f.extend(r.pose.iter().map(|x| fmt(*x)));
-            if track {
-                f.extend(r.posterior.iter().map(|x| fmt(*x)));
-                let s = r.theta_std.unwrap_or([f64::NAN; 2]);
-                f.extend([
-                    fmt(s[0]),
-                    fmt(s[1]),
-                    fmt(r.entropy.unwrap_or(f64::NAN)),
-                    fmt(r.ess.unwrap_or(f64::NAN)),
-                ]);
-            }
-            writeln!(out, "{}", f.join(","))?;
+            write_row(&mut out, r, track)?;
         }
         out.flush()
     }
@@ -231,6 +208,89 @@ impl Trajectory {
             rows,
         })
     }
+}
+
+/// A tracker-output CSV written row by row: a temporary file beside `path`, renamed into place by
+/// [`finish`](Self::finish) (removed if it is dropped before), so that tracking a long video
+/// needs no memory per frame. The bytes are those of [`Trajectory::save_with_comment`].
+pub struct TrajectoryWriter {
+    path: std::path::PathBuf,
+    tmp: std::path::PathBuf,
+    out: std::io::BufWriter<std::fs::File>,
+    guard: TempGuard,
+}
+
+impl TrajectoryWriter {
+    /// Starts `path`: `comment` (lines starting with `#`), then the header of a tracker output
+    /// with the posterior columns of `actions`.
+    ///
+    /// # Errors
+    /// When the temporary file cannot be created or written.
+    pub fn create(path: &Path, comment: &str, actions: &[String]) -> Result<Self> {
+        let tmp = temp_path(path);
+        let file = std::fs::File::create(&tmp).map_err(|e| Error::write(path, e))?;
+        let guard = TempGuard::new(&tmp);
+        let mut out = std::io::BufWriter::new(file);
+        out.write_all(comment.as_bytes())
+            .and_then(|()| write_header(&mut out, actions, true))
+            .map_err(|e| Error::write(path, e))?;
+        Ok(Self {
+            path: path.to_path_buf(),
+            tmp,
+            out,
+            guard,
+        })
+    }
+
+    /// Appends one row.
+    ///
+    /// # Errors
+    /// When the file cannot be written.
+    pub fn push(&mut self, row: &TrajRow) -> Result<()> {
+        write_row(&mut self.out, row, true).map_err(|e| Error::write(&self.path, e))
+    }
+
+    /// Flushes the file and renames it into place.
+    ///
+    /// # Errors
+    /// When the file cannot be written or renamed.
+    pub fn finish(mut self) -> Result<()> {
+        self.out.flush().map_err(|e| Error::write(&self.path, e))?;
+        std::fs::rename(&self.tmp, &self.path).map_err(|e| Error::write(&self.path, e))?;
+        self.guard.keep();
+        Ok(())
+    }
+}
+
+fn write_header<W: Write>(out: &mut W, actions: &[String], track: bool) -> std::io::Result<()> {
+    let mut header: Vec<String> = BASE_COLUMNS.iter().map(|s| (*s).to_string()).collect();
+    if track {
+        header.extend(actions.iter().map(|a| format!("p_{a}")));
+        header.extend(["theta_u_std", "theta_v_std", "entropy", "ess"].map(String::from));
+    }
+    writeln!(out, "{}", header.join(","))
+}
+
+fn write_row<W: Write>(out: &mut W, r: &TrajRow, track: bool) -> std::io::Result<()> {
+    let mut f = vec![
+        r.frame.to_string(),
+        format!("{:.6}", r.time),
+        r.action.clone(),
+        fmt(r.theta[0]),
+        fmt(r.theta[1]),
+    ];
+    f.extend(r.pose.iter().map(|x| fmt(*x)));
+    if track {
+        f.extend(r.posterior.iter().map(|x| fmt(*x)));
+        let s = r.theta_std.unwrap_or([f64::NAN; 2]);
+        f.extend([
+            fmt(s[0]),
+            fmt(s[1]),
+            fmt(r.entropy.unwrap_or(f64::NAN)),
+            fmt(r.ess.unwrap_or(f64::NAN)),
+        ]);
+    }
+    writeln!(out, "{}", f.join(","))
 }
 
 /// Removes a temporary file when dropped, unless [`TempGuard::keep`] was called (after the

@@ -513,6 +513,7 @@ pub fn track_video<'py>(
         mcap_images,
         csv,
         overlay: None,
+        keep_trajectory: false,
     };
     let (m, s) = (&model.inner, &scene.inner);
     let summary = py

@@ -149,6 +149,7 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
         mcap_images: args.images,
         csv: args.csv.clone(),
         overlay: args.overlay.clone(),
+        keep_trajectory: false,
     };
     let bar = super::frame_bar(source.len_hint());
     let started = std::time::Instant::now();
