@@ -23,6 +23,7 @@ pub mod pipeline;
 pub mod plots;
 pub mod scene;
 pub mod session;
+pub mod style;
 pub mod synth;
 pub mod track_csv;
 pub mod train;

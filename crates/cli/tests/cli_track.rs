@@ -730,3 +730,57 @@ fn sigterm_finishes_a_valid_mcap() {
         assert!(v.status.success(), "{}", String::from_utf8_lossy(&v.stdout));
     }
 }
+
+#[test]
+fn synth_random_style_writes_its_scene_and_style_and_repeats_from_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let synth = |out: &str, style: &str| {
+        Command::new(BIN)
+            .current_dir(dir.path())
+            .args(["synth", "-o", out, "--action", "point@-0.1,0.42"])
+            .args(["--seed", "1", "--style", style])
+            .output()
+            .unwrap()
+    };
+    let out = synth("a", "random");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let a = dir.path().join("a");
+    let style = actrack::style::Style::parse(
+        &std::fs::read_to_string(a.join("style.toml")).unwrap(),
+        &a.join("style.toml"),
+    )
+    .unwrap();
+    assert_eq!(style, actrack::style::Style::random(1));
+    // The scene is seen through the style's camera.
+    let scene = actrack::scene::Scene::load(&a.join("scene.toml")).unwrap();
+    let cam = &scene.cameras[0].model;
+    assert_eq!(
+        (cam.width, cam.height),
+        (style.camera.width, style.camera.height)
+    );
+    assert_eq!(cam.distortion, style.camera.distortion);
+    let first = image::open(a.join("frames/frame_00000.png")).unwrap();
+    assert_eq!((first.width(), first.height()), (cam.width, cam.height));
+    // The style file gives the same video again.
+    let out = synth("b", "a/style.toml");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    for k in [0, 20, 40] {
+        let name = format!("frames/frame_{k:05}.png");
+        assert!(
+            std::fs::read(a.join(&name)).unwrap()
+                == std::fs::read(dir.path().join("b").join(&name)).unwrap(),
+            "{name}"
+        );
+    }
+    let out = synth("c", "glossy");
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--style glossy"));
+}

@@ -45,6 +45,10 @@ pub struct Body {
     pub head_center: [f64; 3],
     /// Head radius.
     pub head_radius: f64,
+    /// The other (not tracked) arm resting on the table: shoulder, elbow and fingertip, drawn
+    /// when [`Appearance::other_arm`].
+    #[serde(default)]
+    pub other_arm: Option<[f64; 9]>,
 }
 
 impl Body {
@@ -66,8 +70,23 @@ impl Body {
             torso_radius: 0.15,
             head_center: (mid + Vector3::new(0.0, 0.0, 0.2)).into(),
             head_radius: 0.1,
+            other_arm: Some(resting_arm(
+                2.0 * mid - s + Vector3::new(f.x, f.y, 0.0) * 0.08,
+                Vector3::new(f.x, f.y, 0.0),
+                (mid - s).normalize() * -1.0,
+            )),
         }
     }
+}
+
+/// A resting arm from `shoulder`: the upper arm hangs down and a little forward, the forearm
+/// lies forward and a little towards the body's midline (`inward`, horizontal).
+fn resting_arm(shoulder: Vector3<f64>, forward: Vector3<f64>, inward: Vector3<f64>) -> [f64; 9] {
+    let elbow = shoulder + Vector3::new(0.0, 0.0, -0.27) + forward * 0.06;
+    let finger = elbow + forward * 0.42 + inward * 0.1 + Vector3::new(0.0, 0.0, 0.02);
+    [
+        shoulder.x, shoulder.y, shoulder.z, elbow.x, elbow.y, elbow.z, finger.x, finger.y, finger.z,
+    ]
 }
 
 /// Renders synthetic frames. All fields are public; [`SceneSynth::new`] gives plausible
@@ -90,6 +109,80 @@ pub struct SceneSynth {
     pub skin_color: [u8; 3],
     /// Table colour.
     pub table_color: [u8; 3],
+    /// Lighting, textures and what else moves in the scene ([`Appearance::default`]: the
+    /// classic look).
+    #[serde(default)]
+    pub appearance: Appearance,
+}
+
+/// The pattern on the table top.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum TablePattern {
+    /// Faint wood grain along the table's x axis.
+    #[default]
+    Grain,
+    /// A plain top.
+    Plain,
+    /// A chequered cloth of 8 × 6 cells.
+    Checker,
+}
+
+/// How a scene looks beyond its geometry: what randomised styles vary. The default is the
+/// classic look of [`SceneSynth::new`] (its frames are byte for byte those of a synthesiser
+/// without these settings).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct Appearance {
+    /// Contrast of the shading across the arm, torso and objects: 1 is the classic lit
+    /// cylinder, 0 a flat fill, above 1 harder light.
+    pub shading: f64,
+    /// Where the light comes from in the image (radians, 0 = from the right, π/2 = from
+    /// below); `None`: the classic light, from the top left.
+    pub light_angle: Option<f64>,
+    /// The background's base colour; `None`: drawn from the seed.
+    pub background: Option<[u8; 3]>,
+    /// Amplitude of the background's fine texture, grey levels (classic 6).
+    pub texture: f64,
+    /// The table top's pattern.
+    pub table_pattern: TablePattern,
+    /// Amplitude of the torso's and head's sway, metres (0: still).
+    pub sway: f64,
+    /// Draws the other arm, resting on the table (needs [`Body::other_shoulder`]).
+    pub other_arm: bool,
+    /// Global brightness factor (exposure; 1 = as drawn).
+    pub gain: f64,
+    /// Darkening towards the corners: the brightness at the image's corner is `1 − vignette`.
+    pub vignette: f64,
+}
+
+impl Default for Appearance {
+    fn default() -> Self {
+        Self {
+            shading: 1.0,
+            light_angle: None,
+            background: None,
+            texture: 6.0,
+            table_pattern: TablePattern::Grain,
+            sway: 0.0,
+            other_arm: false,
+            gain: 1.0,
+            vignette: 0.0,
+        }
+    }
+}
+
+/// A cup (an upright cylinder) standing on the table or carried by the hand, world frame.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Cup {
+    /// Centre of its base, metres.
+    pub base: [f64; 3],
+    /// Radius, metres.
+    pub radius: f64,
+    /// Height, metres.
+    pub height: f64,
+    /// Colour.
+    pub color: [u8; 3],
 }
 
 impl SceneSynth {
@@ -104,6 +197,7 @@ impl SceneSynth {
             shirt_color: [40, 70, 150],
             skin_color: [225, 170, 140],
             table_color: [165, 120, 75],
+            appearance: Appearance::default(),
         }
     }
 
@@ -148,8 +242,33 @@ impl SceneSynth {
         seed: u64,
         frame: u64,
     ) -> Result<ImageRgb8, RenderError> {
+        self.render_exposure(cache, camera, std::slice::from_ref(pose), &[], seed, frame)
+    }
+
+    /// Frame `frame` of a video as [`SceneSynth::render_frame`] draws it, with `cups` in the
+    /// scene and the arm moving during the exposure: the frame is the mean of the scene drawn
+    /// at each pose of `exposure` (one pose: no motion blur; [`SceneSynth::render_frame`]'s
+    /// bytes when `cups` is empty). Deterministic in all inputs.
+    ///
+    /// # Errors
+    /// [`RenderError`] for an invalid camera or geometry, an empty `exposure` or a frame that
+    /// cannot be allocated.
+    pub fn render_exposure(
+        &self,
+        cache: &mut SynthCache,
+        camera: &Camera,
+        exposure: &[[f64; 9]],
+        cups: &[Cup],
+        seed: u64,
+        frame: u64,
+    ) -> Result<ImageRgb8, RenderError> {
         camera.validate()?;
         self.geometry.validate()?;
+        if exposure.is_empty() {
+            return Err(RenderError::InvalidImage(
+                "synthesis needs at least one pose per frame".into(),
+            ));
+        }
         let (w, h) = (camera.width, camera.height);
         let fresh = cache
             .layer
@@ -161,7 +280,7 @@ impl SceneSynth {
                 RenderError::InvalidImage(format!("cannot allocate a {w}×{h} frame"))
             })?;
             let mut rng = Pcg64Mcg::seed_from_u64(seed);
-            background(&mut pix, &mut rng);
+            background(&mut pix, &mut rng, &self.appearance);
             clutter(&mut pix, &mut rng, self.clutter);
             if let Some(t) = &self.table {
                 self.draw_table(&mut pix, camera, t);
@@ -182,11 +301,54 @@ impl SceneSynth {
         let Some(layer) = cache.layer.as_ref() else {
             return Err(RenderError::InvalidImage("synthesis cache is empty".into()));
         };
+        let noise = layer.noise.as_deref().map(|n| {
+            let offset = noise_offset(seed, frame);
+            &n[offset..]
+        });
+        if let [pose] = exposure {
+            let mut pix = layer.pix.clone();
+            self.draw_moving(&mut pix, camera, pose, cups, frame);
+            return Ok(to_rgb(&pix, noise, &self.appearance));
+        }
+        // Motion blur: the mean of the exposure's frames.
+        let mut sum = vec![0u32; layer.pix.data().len()];
+        for pose in exposure {
+            let mut pix = layer.pix.clone();
+            self.draw_moving(&mut pix, camera, pose, cups, frame);
+            for (s, v) in sum.iter_mut().zip(pix.data()) {
+                *s += u32::from(*v);
+            }
+        }
+        let n = exposure.len() as u32;
         let mut pix = layer.pix.clone();
-        // Body parts and arm parts, far to near.
+        for (d, s) in pix.data_mut().iter_mut().zip(&sum) {
+            *d = ((s + n / 2) / n) as u8;
+        }
+        Ok(to_rgb(&pix, noise, &self.appearance))
+    }
+
+    /// Draws what changes from frame to frame, far to near: torso, head and the other arm (with
+    /// their sway), the cups and the tracked arm at `pose`.
+    fn draw_moving(
+        &self,
+        pix: &mut Pixmap,
+        camera: &Camera,
+        pose: &[f64; 9],
+        cups: &[Cup],
+        frame: u64,
+    ) {
+        let look = &self.appearance;
         let mut items: Vec<(f64, Part2, [u8; 3], bool)> = Vec::new();
         if let Some(b) = &self.body {
-            let (bot, top) = (Vector3::from(b.torso_bottom), Vector3::from(b.torso_top));
+            // The sway: slow, incommensurate sines in x and y, zero at the torso's bottom.
+            let t = frame as f64;
+            let sway = Vector3::new(
+                look.sway * (t * 0.071).sin(),
+                look.sway * 0.6 * (t * 0.043 + 1.0).sin(),
+                0.0,
+            );
+            let bot = Vector3::from(b.torso_bottom);
+            let top = Vector3::from(b.torso_top) + sway;
             let cone = [
                 bot[0], bot[1], bot[2], top[0], top[1], top[2], top[0], top[1], top[2],
             ];
@@ -200,7 +362,7 @@ impl SceneSynth {
             if let Some(p) = project_parts(camera, &torso, &cone).first() {
                 items.push((depth + b.torso_radius, *p, self.shirt_color, true));
             }
-            let hc = Vector3::from(b.head_center);
+            let hc = Vector3::from(b.head_center) + sway * 1.3;
             let xc = camera.to_camera(&hc);
             if let Some(c) = camera.project_camera(&xc) {
                 let r = b.head_radius * camera.mean_focal() / xc.z;
@@ -232,46 +394,76 @@ impl SceneSynth {
                     items.push((xc.z + 0.01, *p, self.skin_color, true));
                 }
             }
-        }
-        if let Some(parts) = self.geometry.parts(pose) {
-            let projected = project_parts(camera, &self.geometry, pose);
-            let depths = [
-                camera.to_camera(&(0.5 * (parts.upper.0 + parts.upper.1))).z,
-                camera
-                    .to_camera(&(0.5 * (parts.forearm.0 + parts.forearm.1)))
-                    .z,
-                camera.to_camera(&parts.hand_centre).z,
-            ];
-            let colors = [
-                self.shirt_color,
-                self.skin_color,
-                shade(self.skin_color, 0.95),
-            ];
-            // project_parts keeps the order upper, forearm, hand but may drop parts behind the
-            // camera; match them by kind and order.
-            let mut k = 0;
-            for p in projected {
-                let idx = match p {
-                    Part2::Ellipse { .. } => 2,
-                    Part2::Capsule { .. } => {
-                        k += 1;
-                        k - 1
-                    }
-                };
-                let idx = idx.min(2);
-                items.push((depths[idx], p, colors[idx], true));
+            if look.other_arm
+                && let Some(rest) = b.other_arm
+            {
+                let mut rest = rest;
+                for (i, v) in rest.iter_mut().enumerate() {
+                    *v += sway[i % 3] * [1.0, 0.6, 0.3][i / 3];
+                }
+                self.push_arm(&mut items, camera, &rest);
             }
         }
+        for c in cups {
+            let base = Vector3::from(c.base);
+            let top = base + Vector3::new(0.0, 0.0, c.height);
+            let (xb, xt) = (camera.to_camera(&base), camera.to_camera(&top));
+            if let (Some(pb), Some(pt)) = (camera.project_camera(&xb), camera.project_camera(&xt)) {
+                let f = camera.mean_focal();
+                let cup = Part2::Capsule {
+                    c0: [pb.x, pb.y],
+                    c1: [pt.x, pt.y],
+                    r0: c.radius * f / xb.z,
+                    r1: c.radius * f / xt.z,
+                };
+                items.push((0.5 * (xb.z + xt.z), cup, c.color, true));
+            }
+        }
+        self.push_arm(&mut items, camera, pose);
         items.sort_by(|a, b| b.0.total_cmp(&a.0));
         let mut poly = Vec::new();
         for (_, part, color, linear) in &items {
-            draw_part(&mut pix, part, *color, *linear, &mut poly);
+            draw_part(pix, part, *color, *linear, look, &mut poly);
         }
-        let noise = layer.noise.as_deref().map(|n| {
-            let offset = noise_offset(seed, frame);
-            &n[offset..]
-        });
-        Ok(to_rgb(&pix, noise))
+    }
+
+    /// The three parts of an arm at `pose` (world) with their depths and colours.
+    fn push_arm(
+        &self,
+        items: &mut Vec<(f64, Part2, [u8; 3], bool)>,
+        camera: &Camera,
+        pose: &[f64; 9],
+    ) {
+        let Some(parts) = self.geometry.parts(pose) else {
+            return;
+        };
+        let projected = project_parts(camera, &self.geometry, pose);
+        let depths = [
+            camera.to_camera(&(0.5 * (parts.upper.0 + parts.upper.1))).z,
+            camera
+                .to_camera(&(0.5 * (parts.forearm.0 + parts.forearm.1)))
+                .z,
+            camera.to_camera(&parts.hand_centre).z,
+        ];
+        let colors = [
+            self.shirt_color,
+            self.skin_color,
+            shade(self.skin_color, 0.95),
+        ];
+        // project_parts keeps the order upper, forearm, hand but may drop parts behind the
+        // camera; match them by kind and order.
+        let mut k = 0;
+        for p in projected {
+            let idx = match p {
+                Part2::Ellipse { .. } => 2,
+                Part2::Capsule { .. } => {
+                    k += 1;
+                    k - 1
+                }
+            };
+            let idx = idx.min(2);
+            items.push((depths[idx], p, colors[idx], true));
+        }
     }
 
     fn draw_table(&self, pix: &mut Pixmap, camera: &Camera, t: &Table) {
@@ -321,7 +513,45 @@ impl SceneSynth {
                 ..Paint::default()
             },
         );
-        // Wood grain: a few faint lines along the table's x axis.
+        match self.appearance.table_pattern {
+            TablePattern::Grain => self.draw_grain(pix, camera, c, ex, ey),
+            TablePattern::Plain => {}
+            TablePattern::Checker => {
+                // Every other cell of an 8 × 6 grid, darker.
+                let paint = Paint {
+                    shader: solid(shade(self.table_color, 0.7)),
+                    ..Paint::default()
+                };
+                let (nx, ny) = (8, 6);
+                for i in 0..nx {
+                    for j in (i % 2..ny).step_by(2) {
+                        let at = |a: usize, b: usize| {
+                            let (fa, fb) = (
+                                a as f64 / nx as f64 * 2.0 - 1.0,
+                                b as f64 / ny as f64 * 2.0 - 1.0,
+                            );
+                            camera.project(&(c + ex * fa + ey * fb)).map(|p| [p.x, p.y])
+                        };
+                        let quad = [at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1)];
+                        if quad.iter().all(Option::is_some) {
+                            let quad: Vec<[f64; 2]> = quad.into_iter().flatten().collect();
+                            fill_polygon(pix, &quad, &paint);
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// Wood grain: a few faint lines along the table's x axis.
+    fn draw_grain(
+        &self,
+        pix: &mut Pixmap,
+        camera: &Camera,
+        c: Vector3<f64>,
+        ex: Vector3<f64>,
+        ey: Vector3<f64>,
+    ) {
         let grain = shade(self.table_color, 0.8);
         let paint = Paint {
             shader: solid(grain),
@@ -412,6 +642,7 @@ fn draw_part(
     part: &Part2,
     base: [u8; 3],
     linear: bool,
+    look: &Appearance,
     poly: &mut Vec<[f64; 2]>,
 ) {
     poly.clear();
@@ -419,46 +650,65 @@ fn draw_part(
     if poly.len() < 3 {
         return;
     }
-    let stops = |lo: f64, hi: f64| {
+    let stops = |lo: f64, mid: f64, hi: f64| {
         vec![
             GradientStop::new(0.0, color(shade(base, lo))),
-            GradientStop::new(0.45, color(shade(base, hi))),
+            GradientStop::new(mid as f32, color(shade(base, hi))),
             GradientStop::new(1.0, color(shade(base, lo * 0.9))),
         ]
     };
+    // Shading contrast: the classic stops scaled about 1.
+    let k = |v: f64| 1.0 + look.shading * (v - 1.0);
+    let light = look.light_angle.map(|a| Vector2::new(a.cos(), a.sin()));
     let shader = match *part {
         Part2::Capsule { c0, c1, r0, r1 } if linear && (r0 + r1) > 0.5 => {
             let d = Vector2::from(c1) - Vector2::from(c0);
-            let n = Vector2::new(-d.y, d.x)
+            let mut n = Vector2::new(-d.y, d.x)
                 .try_normalize(1e-9)
                 .unwrap_or_else(Vector2::x);
+            // The highlight lies towards the light: at 0.45 of the way from a to b classically.
+            let mut mid = 0.45;
+            if let Some(l) = light {
+                if n.dot(&l) > 0.0 {
+                    n = -n;
+                }
+                mid = 0.5 + 0.4 * n.dot(&l).abs();
+            }
             let r = 0.5 * (r0 + r1);
             let m = 0.5 * (Vector2::from(c0) + Vector2::from(c1));
             let (a, b) = (m - n * r, m + n * r);
             LinearGradient::new(
                 pt([a.x, a.y]),
                 pt([b.x, b.y]),
-                stops(0.6, 1.15),
+                stops(k(0.6), mid, k(1.15)),
                 SpreadMode::Pad,
                 Transform::identity(),
             )
         }
-        Part2::Capsule { c0, r0, .. } if r0 > 0.5 => RadialGradient::new(
-            pt([c0[0] - 0.3 * r0, c0[1] - 0.3 * r0]),
-            pt(c0),
-            (1.3 * r0) as f32,
-            stops(1.15, 0.95),
-            SpreadMode::Pad,
-            Transform::identity(),
-        ),
-        Part2::Ellipse { c, a, .. } if a > 0.5 => RadialGradient::new(
-            pt([c[0], c[1] - 0.2 * a]),
-            pt(c),
-            (1.2 * a) as f32,
-            stops(1.1, 0.85),
-            SpreadMode::Pad,
-            Transform::identity(),
-        ),
+        Part2::Capsule { c0, r0, .. } if r0 > 0.5 => {
+            let off = light.map_or([-0.3 * r0, -0.3 * r0], |l| {
+                [-0.4 * r0 * l.x, -0.4 * r0 * l.y]
+            });
+            RadialGradient::new(
+                pt([c0[0] + off[0], c0[1] + off[1]]),
+                pt(c0),
+                (1.3 * r0) as f32,
+                stops(k(1.15), 0.45, k(0.95)),
+                SpreadMode::Pad,
+                Transform::identity(),
+            )
+        }
+        Part2::Ellipse { c, a, .. } if a > 0.5 => {
+            let off = light.map_or([0.0, -0.2 * a], |l| [-0.3 * a * l.x, -0.3 * a * l.y]);
+            RadialGradient::new(
+                pt([c[0] + off[0], c[1] + off[1]]),
+                pt(c),
+                (1.2 * a) as f32,
+                stops(k(1.1), 0.45, k(0.85)),
+                SpreadMode::Pad,
+                Transform::identity(),
+            )
+        }
         _ => None,
     }
     .unwrap_or_else(|| solid(base));
@@ -473,13 +723,16 @@ fn draw_part(
 }
 
 /// A wall-like background: a random base colour, low-frequency shading and fine texture.
-fn background(pix: &mut Pixmap, rng: &mut Pcg64Mcg) {
+fn background(pix: &mut Pixmap, rng: &mut Pcg64Mcg, look: &Appearance) {
     let (w, h) = (pix.width() as usize, pix.height() as usize);
-    let base = [
+    let mut base = [
         rng.random_range(90.0..190.0),
         rng.random_range(90.0..190.0),
         rng.random_range(90.0..190.0),
     ];
+    if let Some(b) = look.background {
+        base = b.map(f64::from);
+    }
     let wave = |len: usize, rng: &mut Pcg64Mcg| -> Vec<f64> {
         let comps: Vec<(f64, f64, f64)> = (0..3)
             .map(|_| {
@@ -501,7 +754,9 @@ fn background(pix: &mut Pixmap, rng: &mut Pcg64Mcg) {
     };
     let cols = wave(w, rng);
     let rows = wave(h, rng);
-    let texture: Vec<f64> = (0..251).map(|_| rng.random_range(-6.0..6.0)).collect();
+    let texture: Vec<f64> = (0..251)
+        .map(|_| rng.random_range(-6.0..6.0) * (look.texture / 6.0))
+        .collect();
     let px = pix.pixels_mut();
     for y in 0..h {
         for x in 0..w {
@@ -627,15 +882,32 @@ pub struct SynthCache {
     layer: Option<Layer>,
 }
 
-/// Pixmap → RGB8 with additive sensor noise (one value per channel value).
-fn to_rgb(pix: &Pixmap, noise: Option<&[f64]>) -> ImageRgb8 {
+/// Pixmap → RGB8 with the appearance's gain and vignette and additive sensor noise (one value
+/// per channel value).
+fn to_rgb(pix: &Pixmap, noise: Option<&[f64]>, look: &Appearance) -> ImageRgb8 {
+    let (w, h) = (pix.width() as usize, pix.height() as usize);
     let mut img = ImageRgb8::new(pix.width(), pix.height());
+    // Exact comparisons: the classic look (gain 1, no vignette) keeps its bytes.
+    let lit = (look.gain - 1.0).abs() > 0.0 || look.vignette.abs() > 0.0;
+    let (cx, cy) = (0.5 * (w as f64 - 1.0), 0.5 * (h as f64 - 1.0));
+    let r2max = (cx * cx + cy * cy).max(1.0);
     for (i, (o, p)) in img.data.chunks_exact_mut(3).zip(pix.pixels()).enumerate() {
         let c = p.demultiply();
         let rgb = [c.red(), c.green(), c.blue()];
+        let light = if lit {
+            let (x, y) = ((i % w) as f64 - cx, (i / w) as f64 - cy);
+            look.gain * (1.0 - look.vignette * (x * x + y * y) / r2max)
+        } else {
+            1.0
+        };
         for (k, (dst, v)) in o.iter_mut().zip(rgb).enumerate() {
             let n = noise.map_or(0.0, |n| n[3 * i + k]);
-            *dst = (f64::from(v) + n).round().clamp(0.0, 255.0) as u8;
+            let v = if lit {
+                f64::from(v) * light
+            } else {
+                f64::from(v)
+            };
+            *dst = (v + n).round().clamp(0.0, 255.0) as u8;
         }
     }
     img

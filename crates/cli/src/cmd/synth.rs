@@ -5,6 +5,7 @@ use std::process::ExitCode;
 
 use actrack::model::ActionModel;
 use actrack::scene::{Scene, default_scene};
+use actrack::style::{Style, render_styled};
 use actrack::synth::{MotionSource, random_targets, render_frames, save_frames, sequence};
 
 /// Options of `synth`.
@@ -38,6 +39,13 @@ pub struct Args {
     /// Also write the frames as `video.y4m`.
     #[arg(long)]
     pub y4m: bool,
+    /// The look of the video: `classic` (the scene's camera, fixed colours), `random` (camera
+    /// placement, field of view, resolution, lens distortion, colours, lighting, textures,
+    /// cups, the other arm, blur, noise, JPEG compression and dropped frames drawn from
+    /// --seed; the scene's camera is replaced and the scene written to the output with
+    /// `style.toml`) or a `style.toml` written by an earlier run.
+    #[arg(long, default_value = "classic")]
+    pub style: String,
 }
 
 fn parse_action(s: &str) -> Result<(String, Option<[f64; 2]>), String> {
@@ -96,6 +104,26 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
             default_scene(w, h)
         }
     };
+    let style = match args.style.as_str() {
+        "classic" => None,
+        "random" => Some(Style::random(args.seed)),
+        path => {
+            let p = std::path::Path::new(path);
+            if !p.is_file() {
+                return Err(super::UsageError(format!(
+                    "--style {path}: expected classic, random or a style.toml file"
+                ))
+                .into());
+            }
+            let text = std::fs::read_to_string(p)?;
+            Some(Style::parse(&text, p).map_err(|e| super::UsageError(e.to_string()))?)
+        }
+    };
+    // A style brings its own camera: the scene is seen through it.
+    let scene = match &style {
+        Some(s) => s.scene(&scene)?,
+        None => scene,
+    };
     let model = args
         .model
         .as_ref()
@@ -129,12 +157,18 @@ pub fn run(args: &Args) -> anyhow::Result<ExitCode> {
     let seq = sequence(&scene, source, &actions, args.fps, args.seed)
         .map_err(|e| super::UsageError(e.to_string()))?;
     let world: Vec<[f64; 9]> = seq.truth.rows.iter().map(|r| r.pose).collect();
-    let frames = render_frames(&scene, &world, seq.lengths, args.seed)?;
+    let frames = match &style {
+        None => render_frames(&scene, &world, seq.lengths, args.seed)?,
+        Some(style) => render_styled(style, &scene, &seq.truth, seq.lengths)?,
+    };
     std::fs::create_dir_all(&args.output)?;
     save_frames(&frames, &args.output.join("frames"))?;
     seq.truth.save(&args.output.join("truth.csv"))?;
-    if args.scene.is_none() {
+    if args.scene.is_none() || style.is_some() {
         std::fs::write(args.output.join("scene.toml"), scene.to_toml_string())?;
+    }
+    if let Some(style) = &style {
+        std::fs::write(args.output.join("style.toml"), style.to_toml())?;
     }
     if args.y4m {
         let f = std::io::BufWriter::new(std::fs::File::create(args.output.join("video.y4m"))?);
