@@ -29,6 +29,7 @@ use actrack::scene::{
     ArmGeometry, Camera, EdgeSettings, Placement, Scene, Side, TableRegion, look_at, render_arm,
 };
 use actrack::session::{PoseReport, Session};
+use actrack::style::{Style, StyledVideo, video_cups};
 use actrack::synth::scene_synth;
 use actrack::track_csv::{TrajRow, Trajectory};
 use actrack::train::{Progress, import_trials};
@@ -498,6 +499,28 @@ pub struct VideoRun {
     pub frames: Vec<RgbImage>,
 }
 
+/// The arm lengths a video of `scene` is rendered with: the scene's, else the model's.
+pub fn render_lengths(model: &ActionModel, scene: &Scene) -> [f64; 2] {
+    [
+        scene
+            .arm
+            .upper_arm_length
+            .unwrap_or(model.arm_lengths.upper_arm),
+        scene
+            .arm
+            .lower_arm_length
+            .unwrap_or(model.arm_lengths.forearm_hand),
+    ]
+}
+
+/// The world poses of `segments`' frames, back to back.
+pub fn world_poses(scene: &Scene, segments: &[Segment]) -> Vec<[f64; 9]> {
+    segments
+        .iter()
+        .flat_map(|s| s.poses.iter().map(|p| scene.pose_to_world(p)))
+        .collect()
+}
+
 /// Renders `segments` in `scene` frame by frame with `cond`'s clutter, noise and seed, and
 /// tracks them with a [`Session`] of `config`; `overlay_frames` are kept as overlay images (best
 /// pose's contour and θ̄), and every frame of the first view with `keep_frames`.
@@ -510,22 +533,99 @@ pub fn run_video(
     overlay_frames: &[usize],
     keep_frames: bool,
 ) -> Result<VideoRun> {
-    let lengths = [
-        scene
-            .arm
-            .upper_arm_length
-            .unwrap_or(model.arm_lengths.upper_arm),
-        scene
-            .arm
-            .lower_arm_length
-            .unwrap_or(model.arm_lengths.forearm_hand),
-    ];
-    let mut synth = scene_synth(scene, lengths);
+    let mut synth = scene_synth(scene, render_lengths(model, scene));
     synth.clutter = cond.clutter;
     synth.noise_sigma = cond.noise;
-    let geometry = render_arm(scene, lengths);
     let cams: Vec<_> = scene.cameras.iter().map(|c| c.model.clone()).collect();
     let mut caches = vec![actrack_render::synth::SynthCache::default(); cams.len()];
+    let worlds = world_poses(scene, segments);
+    let mut render = |frame: usize| -> Result<Vec<RgbImage>> {
+        cams.iter()
+            .zip(&mut caches)
+            .enumerate()
+            .map(|(v, (cam, cache))| {
+                let img = synth
+                    .render_frame(
+                        cache,
+                        cam,
+                        &worlds[frame],
+                        cond.seed.wrapping_add(v as u64),
+                        frame as u64,
+                    )
+                    .map_err(|e| Error::Config(format!("synth: frame {frame}: {e}")))?;
+                RgbImage::from_raw(img.width, img.height, img.data)
+                    .ok_or_else(|| Error::Config(format!("synth: frame {frame}: bad image buffer")))
+            })
+            .collect()
+    };
+    track_rendered(
+        model,
+        scene,
+        segments,
+        config,
+        overlay_frames,
+        keep_frames,
+        &mut render,
+    )
+}
+
+/// Renders `segments` in `style` through the first camera of `scene` (the style's scene,
+/// [`Style::scene`]): its appearance, the cups on the table and a drink's cup carried by the
+/// hand, motion blur, compression and dropped frames; and tracks them as [`run_video`] does,
+/// with overlays of `overlay_frames`.
+pub fn run_styled_video(
+    model: &ActionModel,
+    scene: &Scene,
+    segments: &[Segment],
+    style: &Style,
+    config: &TrackConfig,
+    overlay_frames: &[usize],
+) -> Result<VideoRun> {
+    let video = StyledVideo::new(style, scene, render_lengths(model, scene))?;
+    let worlds = world_poses(scene, segments);
+    let actions: Vec<(String, [f64; 2])> = segments
+        .iter()
+        .flat_map(|s| s.poses.iter().map(|_| (s.action.clone(), s.theta)))
+        .collect();
+    let cups = video_cups(&video, scene, &worlds, &actions);
+    let mut cache = actrack_render::synth::SynthCache::default();
+    let mut render = |frame: usize| -> Result<Vec<RgbImage>> {
+        Ok(vec![video.frame(
+            &mut cache,
+            &worlds,
+            frame,
+            &cups[video.source(frame)],
+        )?])
+    };
+    track_rendered(
+        model,
+        scene,
+        segments,
+        config,
+        overlay_frames,
+        false,
+        &mut render,
+    )
+}
+
+/// The one tracking loop of the experiment: `render(frame)` gives the views' images of each
+/// frame of `segments`, a [`Session`] of `config` tracks them; see [`run_video`].
+fn track_rendered(
+    model: &ActionModel,
+    scene: &Scene,
+    segments: &[Segment],
+    config: &TrackConfig,
+    overlay_frames: &[usize],
+    keep_frames: bool,
+    render: &mut dyn FnMut(usize) -> Result<Vec<RgbImage>>,
+) -> Result<VideoRun> {
+    let geometry = render_arm(scene, render_lengths(model, scene));
+    let first_cam = scene
+        .cameras
+        .first()
+        .ok_or_else(|| Error::Config("the scene has no camera".into()))?
+        .model
+        .clone();
     let mut session = Session::new(model, scene, config)?;
     let names = session.action_names().to_vec();
     let mut report = PoseReport::new(&config.output)?;
@@ -539,77 +639,70 @@ pub fn run_video(
     let (mut step_ms, mut render_ms, mut overlays, mut frames) =
         (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let (mut inside, mut total) = (0usize, 0usize);
-    let mut frame = 0usize;
-    for seg in segments {
-        for pose in &seg.poses {
-            let world = scene.pose_to_world(pose);
-            let t = frame as f64 / FPS;
-            truth
-                .rows
-                .push(TrajRow::truth(frame, t, &seg.action, seg.theta, world));
-            let t0 = Instant::now();
-            let mut images = Vec::with_capacity(cams.len());
-            for (v, cam) in cams.iter().enumerate() {
-                for j in 0..3 {
-                    total += 1;
-                    let x = Vector3::new(world[3 * j], world[3 * j + 1], world[3 * j + 2]);
-                    if let Some((u, w)) = scene.cameras[v].project(&x)
-                        && scene.cameras[v].in_image(u, w)
-                    {
-                        inside += 1;
-                    }
+    let labels = segments
+        .iter()
+        .flat_map(|s| s.poses.iter().map(move |_| (&s.action, s.theta)));
+    for (frame, (world, (action, theta))) in world_poses(scene, segments)
+        .into_iter()
+        .zip(labels)
+        .enumerate()
+    {
+        let t = frame as f64 / FPS;
+        truth
+            .rows
+            .push(TrajRow::truth(frame, t, action, theta, world));
+        for cam in &scene.cameras {
+            for j in 0..3 {
+                total += 1;
+                let x = Vector3::new(world[3 * j], world[3 * j + 1], world[3 * j + 2]);
+                if let Some((u, w)) = cam.project(&x)
+                    && cam.in_image(u, w)
+                {
+                    inside += 1;
                 }
-                let img = synth
-                    .render_frame(
-                        &mut caches[v],
-                        cam,
-                        &world,
-                        cond.seed.wrapping_add(v as u64),
-                        frame as u64,
-                    )
-                    .map_err(|e| Error::Config(format!("synth: frame {frame}: {e}")))?;
-                images.push(
-                    RgbImage::from_raw(img.width, img.height, img.data).ok_or_else(|| {
-                        Error::Config(format!("synth: frame {frame}: bad image buffer"))
-                    })?,
+            }
+        }
+        let t0 = Instant::now();
+        let images = render(frame)?;
+        render_ms.push(t0.elapsed().as_secs_f64() * 1e3);
+        let r = session.step_rgb(frame, &images.iter().collect::<Vec<_>>())?;
+        step_ms.push(session.last_times().total);
+        let row = track_row(frame, t, &names, &r);
+        let mut b = row.clone();
+        b.pose = r.best_world;
+        best.rows.push(b);
+        let mut m = row.clone();
+        m.pose = scene.pose_to_world(&r.estimate.mean_pose);
+        mean.rows.push(m);
+        let (best_pose, causal) = (r.estimate.best_pose, r.estimate.smoothed_pose);
+        if let Some((mut row, pose)) = report.push(row, best_pose, causal) {
+            row.pose = scene.pose_to_world(&pose);
+            track.rows.push(row);
+        }
+        if let Some(first) = images.into_iter().next() {
+            if overlay_frames.contains(&frame) {
+                let mut img = first.clone();
+                let contour = contour_points(
+                    &first_cam,
+                    &geometry,
+                    &r.best_world,
+                    config.observation.contour.into(),
                 );
+                let dot = scene.cameras[0]
+                    .project(&r.theta_world)
+                    .map(|(u, v)| ([u, v], [1.0, 0.1, 0.1]));
+                draw_overlay(&mut img, &contour, dot);
+                // The true fingertip, green: how far the estimate is from it in the image.
+                let tip = Vector3::new(world[6], world[7], world[8]);
+                let tip = scene.cameras[0]
+                    .project(&tip)
+                    .map(|(u, v)| ([u, v], [0.1, 0.9, 0.1]));
+                draw_overlay(&mut img, &[], tip);
+                overlays.push((frame, img));
             }
-            render_ms.push(t0.elapsed().as_secs_f64() * 1e3);
-            let r = session.step_rgb(frame, &images.iter().collect::<Vec<_>>())?;
-            step_ms.push(session.last_times().total);
-            let row = track_row(frame, t, &names, &r);
-            let mut b = row.clone();
-            b.pose = r.best_world;
-            best.rows.push(b);
-            let mut m = row.clone();
-            m.pose = scene.pose_to_world(&r.estimate.mean_pose);
-            mean.rows.push(m);
-            let (best_pose, causal) = (r.estimate.best_pose, r.estimate.smoothed_pose);
-            if let Some((mut row, pose)) = report.push(row, best_pose, causal) {
-                row.pose = scene.pose_to_world(&pose);
-                track.rows.push(row);
+            if keep_frames {
+                frames.push(first);
             }
-            let mut images = images.into_iter();
-            if let Some(first) = images.next() {
-                if overlay_frames.contains(&frame) {
-                    let mut img = first.clone();
-                    let contour = contour_points(
-                        &cams[0],
-                        &geometry,
-                        &r.best_world,
-                        config.observation.contour.into(),
-                    );
-                    let dot = scene.cameras[0]
-                        .project(&r.theta_world)
-                        .map(|(u, v)| ([u, v], [1.0, 0.1, 0.1]));
-                    draw_overlay(&mut img, &contour, dot);
-                    overlays.push((frame, img));
-                }
-                if keep_frames {
-                    frames.push(first);
-                }
-            }
-            frame += 1;
         }
     }
     for (mut row, pose) in report.finish() {

@@ -17,6 +17,7 @@ use actrack::manifest::Manifest;
 use actrack::mocap::ArmSide;
 use actrack::model::ActionModel;
 use actrack::train::{Progress, fit_actions, import_manifest};
+use actrack_experiments::generalisation;
 use actrack_experiments::reproduce::{
     Condition, ConditionResult, ModelKind, Segment, TestTrial, TrialSet, VideoRun, back_to_back,
     export_trial, load_conditions, rest_heights, run_condition, run_video, subject_lengths,
@@ -498,6 +499,14 @@ fn write_docs(
     );
     std::fs::create_dir_all(&a.docs)?;
     let path = a.docs.join("results.md");
+    // The generalisation benchmark's block (scripts/generalisation) stays where it is.
+    if let Some(block) = std::fs::read_to_string(&path)
+        .ok()
+        .as_deref()
+        .and_then(generalisation::block_of)
+    {
+        md = generalisation::with_block(&md, block, "## Seed spread");
+    }
     std::fs::write(&path, md)?;
     eprintln!("wrote {} in {total:.0} s", path.display());
     Ok(())
