@@ -114,6 +114,10 @@ pub struct ObservationConfig {
     /// Scale γ by √V for V views: the views' errors add up, and without it every extra view
     /// sharpens the likelihood by another factor.
     pub gamma_sqrt_views: bool,
+    /// The image gradient of the edge map G: `grey` (SPEC §4.1) or `colour` (per pixel the
+    /// largest Sobel magnitude of R, G and B; not in the paper), so that a boundary between two
+    /// colours of the same brightness is an edge too.
+    pub gradient: Gradient,
     /// Score short contours as missing points instead of SPEC's mean ε̄ (not in the paper).
     pub short_contour_penalty: PenaltyConfig,
     /// Divide G by its local maximum (not in SPEC §4.1), so weak but local edges count.
@@ -144,6 +148,17 @@ impl From<Contour> for actrack_render::ContourMethod {
             Contour::Analytic => Self::Analytic,
         }
     }
+}
+
+/// The image gradient the edge map is computed from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Gradient {
+    /// SPEC §4.1: the Sobel magnitude of the grey image (0.299 R + 0.587 G + 0.114 B).
+    #[default]
+    Grey,
+    /// The largest Sobel magnitude of the three colour channels.
+    Colour,
 }
 
 /// Where the batch likelihood is computed.
@@ -327,6 +342,7 @@ impl Default for ObservationConfig {
             contour: Contour::Analytic,
             gamma: 0.15,
             gamma_sqrt_views: true,
+            gradient: Gradient::Grey,
             short_contour_penalty: PenaltyConfig::default(),
             local_norm: LocalNormConfig::default(),
             foreground_gate: GateConfig::default(),

@@ -435,6 +435,7 @@ impl Scene {
                 .sigma_px
                 .map_or_else(|| default_edge_sigma(width), |s| s as f32),
             binary: self.edges.binary,
+            colour: false,
         }
     }
 

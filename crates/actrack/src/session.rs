@@ -25,7 +25,7 @@ use actrack_render::{
 use image::RgbImage;
 use nalgebra::Vector3;
 
-use crate::config::{FloorSetting, Median, OutputConfig, ThetaPrior, TrackConfig};
+use crate::config::{FloorSetting, Gradient, Median, OutputConfig, ThetaPrior, TrackConfig};
 use crate::error::{Error, Result};
 use crate::gate::ForegroundGate;
 use crate::model::ActionModel;
@@ -315,7 +315,10 @@ impl Session {
                 )));
             }
             let err = |e: actrack_render::RenderError| Error::Config(format!("frame {frame}: {e}"));
-            let params = self.scene.edge_params(cam.model.width);
+            let params = actrack_render::EdgeParams {
+                colour: obs_cfg.gradient == Gradient::Colour,
+                ..self.scene.edge_params(cam.model.width)
+            };
             let stage = &mut self.views[v];
             if obs_cfg.local_norm.enabled {
                 stage

@@ -16,6 +16,11 @@ pub struct EdgeParams {
     pub sigma: f32,
     /// Set sub-threshold values to 0 (Deutscher/bodytrack binary map) instead of keeping them.
     pub binary: bool,
+    /// The gradient of the colour image instead of the grey one (not in SPEC §4.1): per pixel
+    /// the largest Sobel magnitude of R, G and B, so that a boundary between two colours of
+    /// the same brightness (a sleeve against a wall of another hue) is an edge too. Grey frames
+    /// are unaffected.
+    pub colour: bool,
 }
 
 impl Default for EdgeParams {
@@ -24,6 +29,7 @@ impl Default for EdgeParams {
             tau: 0.2,
             sigma: 4.0,
             binary: false,
+            colour: false,
         }
     }
 }
@@ -159,6 +165,8 @@ struct WorkerScratch {
     dv: Vec<f32>,
     tmp: Vec<f32>,
     pad: Vec<f32>,
+    /// One row of a colour channel's magnitude (colour gradients).
+    chan_mag: Vec<f32>,
 }
 
 /// Fewest rows per band of the Sobel pass when the edge image is split over threads (its halo
@@ -451,6 +459,7 @@ impl EdgeWorkspace {
                         y0: i * split.sobel_rows,
                         h,
                         mag: &mut m,
+                        colour: params.colour,
                     }));
                     drop(m);
                     done[0].fetch_add(1, Ordering::AcqRel);
@@ -595,20 +604,20 @@ impl EdgeWorkspace {
 /// row, the vertical smoothing `a + 2c + b` and the vertical difference `b − a`, then
 /// horizontal difference / smoothing of those. The 1/8 of SPEC §4.1 is left out here: it is a
 /// power of two, so it cancels exactly (bit for bit) in the normalisation by max(g) that
-/// follows.
+/// follows. With `colour` (and a colour frame) the band is computed once per channel of R, G
+/// and B and the largest magnitude kept.
 struct SobelBand<'a, 'f> {
     s: &'a mut WorkerScratch,
     frame: &'a ImageView<'f>,
     y0: usize,
     h: usize,
     mag: &'a mut [f32],
+    colour: bool,
 }
 
 impl pulp::WithSimd for SobelBand<'_, '_> {
     type Output = f32;
 
-    // `hypot` does not vectorise; |g| ≤ 255·2, so the plain form cannot overflow.
-    #[allow(clippy::imprecise_flops)]
     // Inlined into the dispatched function (see `EdgeWorkspace::compute`).
     #[allow(clippy::inline_always)]
     #[inline(always)]
@@ -619,58 +628,99 @@ impl pulp::WithSimd for SobelBand<'_, '_> {
             y0,
             h,
             mag,
+            colour,
         } = self;
-        let w = frame.size().0 as usize;
-        s.sv.resize(w, 0.0);
-        s.dv.resize(w, 0.0);
-        s.grey.resize(3 * w, 0.0);
-        let mut slot_row = [usize::MAX; 3];
-        let mut lanes = [0f32; 8];
-        for y in y0..y0 + mag.len() / w {
-            let ys = [y.saturating_sub(1), y, (y + 1).min(h - 1)];
-            for &yy in &ys {
-                if slot_row[yy % 3] != yy {
-                    grey_row(frame, yy, &mut s.chan, &mut s.grey[(yy % 3) * w..][..w]);
-                    slot_row[yy % 3] = yy;
-                }
+        if colour && matches!(frame, ImageView::Rgb8 { .. }) {
+            let mut m = 0.0;
+            for c in 0..3 {
+                m = sobel_rows(s, frame, y0, h, mag, c > 0, |f, y, _, dst| {
+                    channel_row(f, y, c, dst);
+                });
             }
-            let a = &s.grey[(ys[0] % 3) * w..][..w];
-            let c = &s.grey[(ys[1] % 3) * w..][..w];
-            let b = &s.grey[(ys[2] % 3) * w..][..w];
-            {
-                let (svr, dvr) = (&mut s.sv[..w], &mut s.dv[..w]);
-                for x in 0..w {
-                    svr[x] = a[x] + 2.0 * c[x] + b[x];
-                    dvr[x] = b[x] - a[x];
-                }
-            }
-            let out = &mut mag[(y - y0) * w..][..w];
-            let (sv, dv) = (&s.sv[..w], &s.dv[..w]);
-            let at = |x_l: usize, x: usize, x_r: usize| {
-                let gx = sv[x_r] - sv[x_l];
-                let gy = dv[x_l] + 2.0 * dv[x] + dv[x_r];
-                (gx * gx + gy * gy).sqrt()
-            };
-            if w >= 3 {
-                let n = w - 2;
-                let (sl, sr) = (&sv[..n], &sv[2..2 + n]);
-                let (dl, dc, dr) = (&dv[..n], &dv[1..=n], &dv[2..2 + n]);
-                let o = &mut out[1..=n];
-                for x in 0..n {
-                    let gx = sr[x] - sl[x];
-                    let gy = dl[x] + 2.0 * dc[x] + dr[x];
-                    o[x] = (gx * gx + gy * gy).sqrt();
-                }
-            }
-            out[0] = at(0, 0, 1.min(w - 1));
-            if w > 1 {
-                out[w - 1] = at(w - 2, w - 1, w - 1);
-            }
-            let m = max_value(out);
-            lanes[y % 8] = if m > lanes[y % 8] { m } else { lanes[y % 8] };
+            m
+        } else {
+            sobel_rows(s, frame, y0, h, mag, false, grey_row)
         }
-        max_value(&lanes)
     }
+}
+
+/// The body of [`SobelBand`]: the Sobel magnitude of the rows that `fill` converts (a frame's
+/// grey rows or one channel's), written into `mag`, or with `keep_max` merged into it as the
+/// larger of the two; returns max(mag).
+// `hypot` does not vectorise; |g| ≤ 255·2, so the plain form cannot overflow. Inlined into the
+// dispatched function (see `EdgeWorkspace::compute`).
+#[allow(clippy::imprecise_flops, clippy::inline_always)]
+#[inline(always)]
+fn sobel_rows(
+    s: &mut WorkerScratch,
+    frame: &ImageView<'_>,
+    y0: usize,
+    h: usize,
+    mag: &mut [f32],
+    keep_max: bool,
+    fill: impl Fn(&ImageView<'_>, usize, &mut Vec<f32>, &mut [f32]),
+) -> f32 {
+    let w = frame.size().0 as usize;
+    s.sv.resize(w, 0.0);
+    s.dv.resize(w, 0.0);
+    s.grey.resize(3 * w, 0.0);
+    let mut slot_row = [usize::MAX; 3];
+    let mut lanes = [0f32; 8];
+    for y in y0..y0 + mag.len() / w {
+        let ys = [y.saturating_sub(1), y, (y + 1).min(h - 1)];
+        for &yy in &ys {
+            if slot_row[yy % 3] != yy {
+                fill(frame, yy, &mut s.chan, &mut s.grey[(yy % 3) * w..][..w]);
+                slot_row[yy % 3] = yy;
+            }
+        }
+        let a = &s.grey[(ys[0] % 3) * w..][..w];
+        let c = &s.grey[(ys[1] % 3) * w..][..w];
+        let b = &s.grey[(ys[2] % 3) * w..][..w];
+        {
+            let (svr, dvr) = (&mut s.sv[..w], &mut s.dv[..w]);
+            for x in 0..w {
+                svr[x] = a[x] + 2.0 * c[x] + b[x];
+                dvr[x] = b[x] - a[x];
+            }
+        }
+        s.chan_mag.resize(w, 0.0);
+        let merged = &mut mag[(y - y0) * w..][..w];
+        let out = if keep_max {
+            &mut s.chan_mag[..w]
+        } else {
+            &mut *merged
+        };
+        let (sv, dv) = (&s.sv[..w], &s.dv[..w]);
+        let at = |x_l: usize, x: usize, x_r: usize| {
+            let gx = sv[x_r] - sv[x_l];
+            let gy = dv[x_l] + 2.0 * dv[x] + dv[x_r];
+            (gx * gx + gy * gy).sqrt()
+        };
+        if w >= 3 {
+            let n = w - 2;
+            let (sl, sr) = (&sv[..n], &sv[2..2 + n]);
+            let (dl, dc, dr) = (&dv[..n], &dv[1..=n], &dv[2..2 + n]);
+            let o = &mut out[1..=n];
+            for x in 0..n {
+                let gx = sr[x] - sl[x];
+                let gy = dl[x] + 2.0 * dc[x] + dr[x];
+                o[x] = (gx * gx + gy * gy).sqrt();
+            }
+        }
+        out[0] = at(0, 0, 1.min(w - 1));
+        if w > 1 {
+            out[w - 1] = at(w - 2, w - 1, w - 1);
+        }
+        if keep_max {
+            for (m, &c) in merged.iter_mut().zip(&s.chan_mag[..w]) {
+                *m = if c > *m { c } else { *m };
+            }
+        }
+        let m = max_value(merged);
+        lanes[y % 8] = if m > lanes[y % 8] { m } else { lanes[y % 8] };
+    }
+    max_value(&lanes)
 }
 
 /// Threshold + separable Gaussian `mag → out` for the band's rows `y0 …` (`out` holds the
@@ -867,6 +917,23 @@ fn grey_row(frame: &ImageView<'_>, y: usize, chan: &mut Vec<f32>, dst: &mut [f32
                 *g = if p.is_finite() { p } else { 0.0 };
             }
         }
+    }
+}
+
+/// Channel `c` (0 = R, 1 = G, 2 = B) of an RGB row as f32 (a grey frame's row as it is).
+// Inlined into the dispatched `compute_kernels` (see there).
+#[allow(clippy::inline_always)]
+#[inline(always)]
+fn channel_row(frame: &ImageView<'_>, y: usize, c: usize, dst: &mut [f32]) {
+    let w = dst.len();
+    match *frame {
+        ImageView::Rgb8 { data, .. } => {
+            let (px, _) = data[3 * y * w..3 * (y + 1) * w].as_chunks::<3>();
+            for (g, px) in dst.iter_mut().zip(px) {
+                *g = f32::from(px[c]);
+            }
+        }
+        _ => grey_row(frame, y, &mut Vec::new(), dst),
     }
 }
 

@@ -472,11 +472,11 @@ proptest! {
     }
 
     #[test]
-    fn edge_image_any_size(w in 1u32..40, h in 1u32..40, seed in any::<u64>(), binary in any::<bool>(), sigma in 0.0f32..6.0) {
+    fn edge_image_any_size(w in 1u32..40, h in 1u32..40, seed in any::<u64>(), binary in any::<bool>(), colour in any::<bool>(), sigma in 0.0f32..6.0) {
         let n = (w * h * 3) as usize;
         let data: Vec<u8> = (0..n).map(|i| (seed.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(i as u64).wrapping_mul(1_442_695_040_888_963_407) >> 56) as u8).collect();
         let mut ws = EdgeWorkspace::new();
-        let g = ws.compute(ImageView::rgb8(&data, w, h).unwrap(), &EdgeParams { tau: 0.2, sigma, binary }).unwrap();
+        let g = ws.compute(ImageView::rgb8(&data, w, h).unwrap(), &EdgeParams { tau: 0.2, sigma, binary, colour }).unwrap();
         prop_assert!(g.data().iter().all(|v| (0.0..=1.0).contains(v)));
     }
 }

@@ -1,8 +1,25 @@
 use super::*;
 
 /// Straightforward reference of SPEC §4.1 in f64 with per-pixel clamping.
-#[allow(clippy::imprecise_flops)]
 fn reference(grey: &[f64], w: usize, h: usize, p: &EdgeParams) -> Vec<f64> {
+    finish_reference(sobel_reference(grey, w, h), w, h, p)
+}
+
+/// The colour variant: per pixel the largest Sobel magnitude of R, G and B, then as SPEC §4.1.
+fn colour_reference(rgb: &[u8], w: usize, h: usize, p: &EdgeParams) -> Vec<f64> {
+    let mut g = vec![0.0f64; w * h];
+    for c in 0..3 {
+        let chan: Vec<f64> = rgb.chunks_exact(3).map(|px| f64::from(px[c])).collect();
+        for (m, v) in g.iter_mut().zip(sobel_reference(&chan, w, h)) {
+            *m = m.max(v);
+        }
+    }
+    finish_reference(g, w, h, p)
+}
+
+/// Sobel/8 magnitude with clamped borders.
+#[allow(clippy::imprecise_flops)]
+fn sobel_reference(grey: &[f64], w: usize, h: usize) -> Vec<f64> {
     let at = |x: i64, y: i64| {
         let x = x.clamp(0, w as i64 - 1) as usize;
         let y = y.clamp(0, h as i64 - 1) as usize;
@@ -24,6 +41,11 @@ fn reference(grey: &[f64], w: usize, h: usize, p: &EdgeParams) -> Vec<f64> {
             g[y as usize * w + x as usize] = (gx * gx + gy * gy).sqrt();
         }
     }
+    g
+}
+
+/// Normalisation, threshold, Gaussian and normalisation of SPEC §4.1 on a magnitude image.
+fn finish_reference(mut g: Vec<f64>, w: usize, h: usize, p: &EdgeParams) -> Vec<f64> {
     let m = g.iter().copied().fold(0.0, f64::max);
     for v in &mut g {
         *v /= m;
@@ -90,11 +112,13 @@ fn matches_reference() {
                 tau: 0.35,
                 sigma: 1.5,
                 binary: true,
+                colour: false,
             },
             EdgeParams {
                 tau: 0.1,
                 sigma: 2.2,
                 binary: false,
+                colour: false,
             },
         ] {
             let mut ws = EdgeWorkspace::new();
@@ -118,6 +142,102 @@ fn matches_reference() {
             assert!((max_value(g.data()) - 1.0).abs() < 1e-6);
         }
     }
+}
+
+/// Colour gradients match the f64 reference (largest channel magnitude, then SPEC §4.1).
+#[test]
+fn colour_matches_reference() {
+    for &(w, h) in &[(45usize, 37usize), (8, 5), (3, 40), (17, 2)] {
+        let rgb = test_frame(w, h);
+        for params in [
+            EdgeParams {
+                colour: true,
+                ..EdgeParams::default()
+            },
+            EdgeParams {
+                tau: 0.35,
+                sigma: 1.5,
+                binary: true,
+                colour: true,
+            },
+        ] {
+            let mut ws = EdgeWorkspace::new();
+            let g = ws
+                .compute(ImageView::rgb8(&rgb, w as u32, h as u32).unwrap(), &params)
+                .unwrap()
+                .clone();
+            let r = colour_reference(&rgb, w, h, &params);
+            let err = g
+                .data()
+                .iter()
+                .zip(&r)
+                .map(|(&a, &b)| (f64::from(a) - b).abs())
+                .fold(0.0, f64::max);
+            assert!(err < 1e-4, "{w}×{h} {params:?}: {err}");
+        }
+    }
+}
+
+/// A boundary between two colours of (nearly) the same grey value is no edge in the grey
+/// gradient beside a strong one (a black stripe), and a full edge in the colour gradient; a
+/// grey frame gives the same G either way.
+#[test]
+fn colour_sees_isoluminant_boundaries() {
+    let (w, h) = (40usize, 20usize);
+    // Grey 100 on both sides of column 20 (to 0.02), black from column 32.
+    let (left, right) = ([100u8, 100, 100], [0u8, 150, 105]);
+    let rgb: Vec<u8> = (0..w * h)
+        .flat_map(|i| match i % w {
+            x if x < 20 => left,
+            x if x < 32 => right,
+            _ => [0, 0, 0],
+        })
+        .collect();
+    let frame = ImageView::rgb8(&rgb, w as u32, h as u32).unwrap();
+    let grey = EdgeParams {
+        sigma: 0.0,
+        tau: 0.5,
+        ..EdgeParams::default()
+    };
+    let colour = EdgeParams {
+        colour: true,
+        ..grey
+    };
+    let mut ws = EdgeWorkspace::new();
+    let g = ws.compute(frame, &grey).unwrap().clone();
+    let c = ws.compute(frame, &colour).unwrap().clone();
+    for y in 0..h {
+        let at = |e: &EdgeImage, x: usize| e.data()[y * w + x];
+        assert!(at(&g, 32) > 0.999, "row {y}: {}", at(&g, 32));
+        assert!(at(&g, 20) < 0.01, "row {y}: {}", at(&g, 20));
+        assert!(at(&c, 20) > 0.999, "row {y}: {}", at(&c, 20));
+        assert!(at(&c, 32) > 0.999, "row {y}: {}", at(&c, 32));
+        assert!(at(&c, 10).abs() < 1e-6, "row {y}: {}", at(&c, 10));
+    }
+    // A grey frame: the same G from either gradient.
+    let rgb: Vec<u8> = test_frame(w, h)
+        .chunks_exact(3)
+        .flat_map(|p| [p[1]; 3])
+        .collect();
+    let frame = ImageView::rgb8(&rgb, w as u32, h as u32).unwrap();
+    let a = ws.compute(frame, &EdgeParams::default()).unwrap().clone();
+    let b = ws
+        .compute(
+            frame,
+            &EdgeParams {
+                colour: true,
+                ..EdgeParams::default()
+            },
+        )
+        .unwrap()
+        .clone();
+    let err = a
+        .data()
+        .iter()
+        .zip(b.data())
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f32::max);
+    assert!(err < 1e-5, "{err}");
 }
 
 /// `compute_into` gives what `compute` gives and only trades buffers with the caller.
@@ -145,8 +265,8 @@ fn compute_into_swaps_without_copying() {
     assert!(bad.is_err() || ws.compute_into(bad.unwrap(), &p, &mut out).is_err());
 }
 
-/// Parameter sets of the bit-identity tests: the defaults, a binary map with a small σ, no
-/// smoothing.
+/// Parameter sets of the bit-identity tests: the defaults, a binary map with a small σ on
+/// colour gradients, no smoothing.
 fn variant_params() -> [EdgeParams; 3] {
     [
         EdgeParams::default(),
@@ -154,6 +274,7 @@ fn variant_params() -> [EdgeParams; 3] {
             tau: 0.35,
             sigma: 1.5,
             binary: true,
+            colour: true,
         },
         EdgeParams {
             sigma: 0.0,
