@@ -155,9 +155,9 @@ impl From<Contour> for actrack_render::ContourMethod {
 #[serde(rename_all = "lowercase")]
 pub enum Gradient {
     /// SPEC §4.1: the Sobel magnitude of the grey image (0.299 R + 0.587 G + 0.114 B).
-    #[default]
     Grey,
     /// The largest Sobel magnitude of the three colour channels.
+    #[default]
     Colour,
 }
 
@@ -342,7 +342,7 @@ impl Default for ObservationConfig {
             contour: Contour::Analytic,
             gamma: 0.15,
             gamma_sqrt_views: true,
-            gradient: Gradient::Grey,
+            gradient: Gradient::Colour,
             short_contour_penalty: PenaltyConfig::default(),
             local_norm: LocalNormConfig::default(),
             foreground_gate: GateConfig::default(),

@@ -41,7 +41,8 @@ pub struct StyleResult {
 }
 
 /// The experiment's condition of a style: the reach + drink model, one view, the style's
-/// clutter, noise and seed.
+/// clutter and noise; the filter's seed is the style's plus `filter.seed` (the style draws its
+/// own images), so `filter.seed` gives the tracker's seed-to-seed spread on the same videos.
 fn condition(style: &Style, config: &TrackConfig) -> Condition {
     Condition {
         name: format!("style {}", style.seed),
@@ -51,7 +52,7 @@ fn condition(style: &Style, config: &TrackConfig) -> Condition {
         views: 1,
         clutter: style.clutter,
         noise: style.noise_sigma,
-        seed: style.seed,
+        seed: style.seed.wrapping_add(config.filter.seed),
         actor_height: ActorHeight::Models,
         track: config.clone(),
     }

@@ -562,23 +562,27 @@ pub fn centred_median<'py>(
     Ok(Array2::from_shape_fn((out.len(), 9), |(i, c)| out[i][c]).into_pyarray(py))
 }
 
-/// The edge-distance image G of SPEC §4.1 for an (H, W, 3) or (H, W) uint8 frame, as the tracker
-/// computes it: shape (H, W), float32 in [0, 1]. `sigma` (pixels, default 4 at 640 px wide,
-/// scaled with the width), `tau` (default 0.2) and `binary` override the defaults.
+/// The edge-distance image G of SPEC §4.1 for an (H, W, 3) or (H, W) uint8 frame, computed by
+/// the tracker's edge stage: shape (H, W), float32 in [0, 1]. `sigma` (pixels, default 4 at
+/// 640 px wide, scaled with the width), `tau` (default 0.2) and `binary` override SPEC's
+/// defaults; `colour=True` takes the colour gradient, as the tracker does by default (the key
+/// `observation.gradient = "colour"`), instead of SPEC's grey one.
 #[pyfunction]
-#[pyo3(signature = (frame, *, sigma=None, tau=None, binary=None))]
+#[pyo3(signature = (frame, *, sigma=None, tau=None, binary=None, colour=false))]
 pub fn edge_image<'py>(
     py: Python<'py>,
     frame: &Bound<'_, PyAny>,
     sigma: Option<f32>,
     tau: Option<f32>,
     binary: Option<bool>,
+    colour: bool,
 ) -> PyResult<Bound<'py, PyArray2<f32>>> {
     let img = rgb_image(frame)?;
     let mut params = edge_params(img.width());
     params.sigma = sigma.unwrap_or(params.sigma);
     params.tau = tau.unwrap_or(params.tau);
     params.binary = binary.unwrap_or(params.binary);
+    params.colour = colour;
     let g = py
         .detach(|| {
             let view = ImageView::rgb8(img.as_raw(), img.width(), img.height())?;

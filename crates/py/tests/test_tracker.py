@@ -354,6 +354,15 @@ def test_edge_image():
     assert np.all(flat == 0.0)  # no gradient anywhere: G ≡ 0
     sharp = actrack.edge_image(frames[0], sigma=0.0, binary=True)
     assert set(np.unique(sharp)) <= {0.0, 1.0}
+    # Two colours of (nearly) the same grey value beside a black stripe: only the colour
+    # gradient sees their boundary (column 20).
+    img = np.zeros((30, 40, 3), dtype=np.uint8)
+    img[:, :20] = (100, 100, 100)
+    img[:, 20:32] = (0, 150, 105)
+    grey = actrack.edge_image(img, sigma=0.0, tau=0.5)
+    colour = actrack.edge_image(img, sigma=0.0, tau=0.5, colour=True)
+    assert grey[:, 20].max() < 0.01 and grey[:, 32].min() > 0.999
+    assert colour[:, 20].min() > 0.999 and colour[:, 32].min() > 0.999
 
 
 def test_contour_likelihood_limits(model, scene):

@@ -357,6 +357,7 @@ def edge_image(
     sigma: float | None = None,
     tau: float | None = None,
     binary: bool | None = None,
+    colour: bool = False,
 ) -> npt.NDArray[np.float32]: ...
 def contour_likelihood(
     scene: Scene,
