@@ -523,7 +523,8 @@ pub fn world_poses(scene: &Scene, segments: &[Segment]) -> Vec<[f64; 9]> {
 
 /// Renders `segments` in `scene` frame by frame with `cond`'s clutter, noise and seed, and
 /// tracks them with a [`Session`] of `config`; `overlay_frames` are kept as overlay images (best
-/// pose's contour and θ̄), and every frame of the first view with `keep_frames`.
+/// pose's contour in yellow, θ̄ in red, the true fingertip in green), and every frame of the
+/// first view with `keep_frames`.
 pub fn run_video(
     model: &ActionModel,
     scene: &Scene,

@@ -485,6 +485,7 @@ fn write_docs(
     }
     if !figs.is_empty() {
         md.push_str("## Figures (the first subject's long video, default configuration)\n\n");
+        md.push_str("Overlays: the best pose's contour in yellow, θ̄ in red, the true fingertip in green.\n\n");
         for f in figs {
             let name = f.file_name().and_then(|n| n.to_str()).unwrap_or("");
             let _ = writeln!(md, "![{name}](results/{name})\n");
