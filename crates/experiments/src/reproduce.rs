@@ -32,7 +32,7 @@ use actrack::session::{PoseReport, Session};
 use actrack::style::{Style, StyledVideo, video_cups};
 use actrack::synth::scene_synth;
 use actrack::track_csv::{TrajRow, Trajectory};
-use actrack::train::{Progress, import_trials};
+use actrack::train::{Progress, fit_actions, import_manifest, import_trials};
 use actrack::{Error, Result};
 use actrack_render::contour_points;
 use image::RgbImage;
@@ -497,6 +497,36 @@ pub struct VideoRun {
     pub in_view: f64,
     /// The first view's frames, when asked for ([`run_video`]'s `keep_frames`).
     pub frames: Vec<RgbImage>,
+}
+
+/// The model of `manifest`, loaded from `cache` when it exists, else trained (quietly) and saved
+/// there; with the seconds training took (0 when loaded).
+///
+/// # Errors
+/// Reading, training or writing errors, naming the file.
+pub fn cached_model(manifest: &Path, cache: &Path) -> Result<(ActionModel, f64)> {
+    if cache.exists() {
+        eprintln!("model: reusing {}", cache.display());
+        return Ok((ActionModel::load(cache)?, 0.0));
+    }
+    let t0 = Instant::now();
+    let m = actrack::manifest::Manifest::load(manifest)?;
+    let quiet = |_: Progress| {};
+    let trials = import_manifest(&m, None, &quiet)?;
+    eprintln!(
+        "model: training on {} trials of {}…",
+        trials.len(),
+        manifest.display()
+    );
+    let model = fit_actions(
+        &trials,
+        &m.options,
+        &m.preprocessing,
+        Some(manifest),
+        &quiet,
+    )?;
+    model.save(cache)?;
+    Ok((model, t0.elapsed().as_secs_f64()))
 }
 
 /// The arm lengths a video of `scene` is rendered with: the scene's, else the model's.

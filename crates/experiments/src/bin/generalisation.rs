@@ -15,14 +15,12 @@ use std::time::Instant;
 use actrack::config::TrackConfig;
 use actrack::manifest::Manifest;
 use actrack::mocap::ArmSide;
-use actrack::model::ActionModel;
 use actrack::style::Style;
-use actrack::train::{Progress, fit_actions, import_manifest};
 use actrack_experiments::generalisation::{
     BEGIN, END, HEAD, StyleResult, confusion_table, overall, overall_rows, run_style,
     style_overlays, style_row, with_block,
 };
-use actrack_experiments::reproduce::{TestTrial, test_trials, two_action_label};
+use actrack_experiments::reproduce::{TestTrial, cached_model, test_trials, two_action_label};
 use clap::{Parser, ValueEnum};
 
 type Res<T> = Result<T, Box<dyn std::error::Error>>;
@@ -151,30 +149,6 @@ struct Args {
     docs: PathBuf,
 }
 
-fn model(manifest: &Path, cache: &Path) -> Res<ActionModel> {
-    if cache.exists() {
-        eprintln!("model: reusing {}", cache.display());
-        return Ok(ActionModel::load(cache)?);
-    }
-    let m = Manifest::load(manifest)?;
-    let quiet = |_: Progress| {};
-    let trials = import_manifest(&m, None, &quiet)?;
-    eprintln!(
-        "model: training on {} trials of {}…",
-        trials.len(),
-        manifest.display()
-    );
-    let model = fit_actions(
-        &trials,
-        &m.options,
-        &m.preprocessing,
-        Some(manifest),
-        &quiet,
-    )?;
-    model.save(cache)?;
-    Ok(model)
-}
-
 fn trials(a: &Args) -> Res<Vec<TestTrial>> {
     let manifest = match a.subjects {
         Subjects::Test => "manifests/ue-adl3-test.toml",
@@ -202,7 +176,7 @@ fn main() -> Res<()> {
     let a = Args::parse();
     let t_all = Instant::now();
     std::fs::create_dir_all(&a.out)?;
-    let m = model(
+    let (m, _) = cached_model(
         Path::new("manifests/ue-adl-train.toml"),
         &a.out.join("ue-adl.actrack.json"),
     )?;

@@ -16,12 +16,11 @@ use std::time::Instant;
 use actrack::manifest::Manifest;
 use actrack::mocap::ArmSide;
 use actrack::model::ActionModel;
-use actrack::train::{Progress, fit_actions, import_manifest};
 use actrack_experiments::generalisation;
 use actrack_experiments::reproduce::{
     Condition, ConditionResult, ModelKind, Segment, TestTrial, TrialSet, VideoRun, back_to_back,
-    export_trial, load_conditions, rest_heights, run_condition, run_video, subject_lengths,
-    subject_setup, summarise, test_trials, two_action_label,
+    cached_model, export_trial, load_conditions, rest_heights, run_condition, run_video,
+    subject_lengths, subject_setup, summarise, test_trials, two_action_label,
 };
 use clap::Parser;
 use rayon::prelude::*;
@@ -63,31 +62,6 @@ impl Args {
     fn partial(&self) -> bool {
         self.only.is_some() || self.train_subjects.is_some() || self.export.is_some()
     }
-}
-
-fn model(manifest: &Path, cache: &Path) -> Res<(ActionModel, f64)> {
-    if cache.exists() {
-        eprintln!("model: reusing {}", cache.display());
-        return Ok((ActionModel::load(cache)?, 0.0));
-    }
-    let t0 = Instant::now();
-    let m = Manifest::load(manifest)?;
-    let quiet = |_: Progress| {};
-    let trials = import_manifest(&m, None, &quiet)?;
-    eprintln!(
-        "model: training on {} trials of {}…",
-        trials.len(),
-        manifest.display()
-    );
-    let model = fit_actions(
-        &trials,
-        &m.options,
-        &m.preprocessing,
-        Some(manifest),
-        &quiet,
-    )?;
-    model.save(cache)?;
-    Ok((model, t0.elapsed().as_secs_f64()))
 }
 
 fn cm(x: f64) -> String {
@@ -209,11 +183,11 @@ fn main() -> Res<()> {
     let a = Args::parse();
     let t_all = Instant::now();
     std::fs::create_dir_all(&a.out)?;
-    let (m2, train2) = model(
+    let (m2, train2) = cached_model(
         Path::new("manifests/ue-adl-train.toml"),
         &a.out.join("ue-adl.actrack.json"),
     )?;
-    let (m3, train3) = model(
+    let (m3, train3) = cached_model(
         Path::new("manifests/ue-adl3-train.toml"),
         &a.out.join("ue-adl3.actrack.json"),
     )?;
