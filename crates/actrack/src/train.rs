@@ -131,6 +131,7 @@ pub fn fit_actions(
         .end_mode(EndMode::MustEnd)
         .check()
         .map_err(|e| Error::Config(e.to_string()))?;
+    check_trial_lengths(trials, params.min_sequence_len(), options, preprocessing)?;
     let mut actions = Vec::new();
     for (index, name) in names.iter().enumerate() {
         progress(Progress::Fitting {
@@ -196,6 +197,45 @@ pub fn fit_actions(
             cov_floor: options.cov_floor,
         },
     })
+}
+
+/// Refuses, before any fitting and naming its file, the first trial with fewer frames than
+/// the models' topology needs (`min_frames`, [`actrack_phmm::ValidPhmmParams::min_sequence_len`]):
+/// a training trial passes through every state from the first to the last, jumping at most
+/// `max_jump` states a frame, so `states = 20`, `max_jump = 3` need 8 frames.
+fn check_trial_lengths(
+    trials: &[LabelledTrial],
+    min_frames: usize,
+    options: &TrainOptions,
+    preprocessing: &Preprocessing,
+) -> Result<()> {
+    let Some(t) = trials
+        .iter()
+        .find(|t| t.trial.arm_trajectory.len() < min_frames)
+    else {
+        return Ok(());
+    };
+    let after = match (preprocessing.trim.is_some(), preprocessing.frame_rate) {
+        (true, Some(f)) => format!(" after trimming the rest phases and resampling to {f} Hz"),
+        (true, None) => " after trimming the rest phases".to_string(),
+        (false, Some(f)) => format!(" after resampling to {f} Hz"),
+        (false, None) => String::new(),
+    };
+    let len = t.trial.arm_trajectory.len();
+    Err(Error::invalid(
+        &t.trial.source,
+        format!(
+            "this `{}` trial has {len} frame{}{after}, but training needs at least {min_frames} \
+             frames per trial ({} states, max_jump {}: a trial passes from the first state to the \
+             last, at most {} states a frame): give a longer trial, leave this one out of the \
+             manifest, or train with fewer states or a larger max_jump",
+            t.action,
+            if len == 1 { "" } else { "s" },
+            options.states,
+            options.max_jump,
+            options.max_jump,
+        ),
+    ))
 }
 
 fn theta_stats(thetas: &[DVector<f64>]) -> ([f64; 2], [[f64; 2]; 2], [f64; 2], [f64; 2]) {

@@ -6,26 +6,29 @@ use std::process::Command;
 
 const BIN: &str = env!("CARGO_BIN_EXE_actrack-cli");
 
+/// `bench` with tiny settings; an option in `extra` replaces its default (clap refuses an
+/// option given twice, which would make any bad value look refused).
 fn bench(extra: &[&str]) -> std::process::Output {
-    Command::new(BIN)
-        .args([
-            "bench",
-            "--particles",
-            "24",
-            "--width",
-            "96",
-            "--height",
-            "72",
-            "--frames",
-            "4",
-            "--warmup",
-            "1",
-            "--states",
-            "4",
-        ])
-        .args(extra)
-        .output()
-        .unwrap()
+    let defaults = [
+        ("--particles", "24"),
+        ("--width", "96"),
+        ("--height", "72"),
+        ("--frames", "4"),
+        ("--warmup", "1"),
+        ("--states", "4"),
+    ];
+    let mut args = vec!["bench"];
+    for (flag, value) in defaults {
+        if !extra.contains(&flag) {
+            args.extend([flag, value]);
+        }
+    }
+    args.extend_from_slice(extra);
+    Command::new(BIN).args(&args).output().unwrap()
+}
+
+fn stderr(o: &std::process::Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
 #[test]
@@ -96,6 +99,11 @@ fn text_report_and_usage_errors() {
     }
     let bad = bench(&["--particles", "0"]);
     assert_eq!(bad.status.code(), Some(2));
+    assert!(
+        stderr(&bad).contains("filter.particles"),
+        "{}",
+        stderr(&bad)
+    );
     let bad = bench(&["--contour", "splines"]);
     assert_eq!(bad.status.code(), Some(2));
     // Without the `gpu` feature, `auto` falls back to the CPU with a message.
@@ -103,5 +111,26 @@ fn text_report_and_usage_errors() {
         let out = bench(&["--device", "auto", "--json"]);
         assert!(out.status.success());
         assert!(String::from_utf8_lossy(&out.stderr).contains("CPU"));
+    }
+}
+
+/// `--states 0` (and 1: a left-to-right model needs two states) is refused naming the flag
+/// before the models are trained, not a panic or a model error.
+#[test]
+fn too_few_states_are_refused_naming_the_flag() {
+    for states in ["0", "1"] {
+        let t = std::time::Instant::now();
+        let out = bench(&["--states", states]);
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(2), "--states {states}: {err}");
+        assert!(!err.contains("panicked"), "{err}");
+        assert!(err.contains("--states") && err.contains("≥ 2"), "{err}");
+        assert!(!err.contains("cannot be used multiple times"), "{err}");
+        assert!(
+            out.stdout.is_empty(),
+            "{}",
+            String::from_utf8_lossy(&out.stdout)
+        );
+        assert!(t.elapsed().as_secs_f64() < 20.0, "{:?}", t.elapsed());
     }
 }

@@ -626,3 +626,124 @@ fn eval_refuses_a_track_with_nan_naming_line_and_column() {
     expect_input_error(&o, &[&format!("nan.csv:{}", bad_line + 1), "column `rx`"]);
     assert!(!String::from_utf8_lossy(&o.stdout).contains("NaN"));
 }
+
+#[test]
+fn track_refuses_a_billion_particles_before_allocating() {
+    let f = fixture();
+    let t = std::time::Instant::now();
+    let o = cli(
+        &f.root,
+        &[
+            "track",
+            "--model",
+            "model.actrack.json",
+            "--scene",
+            "scene.toml",
+            "--input",
+            "video/video.y4m",
+            "--particles",
+            "1000000000",
+            "--csv",
+            "billion.csv",
+        ],
+    );
+    let max = actrack::config::MAX_PARTICLES.to_string();
+    expect_input_error(&o, &["filter.particles", "got 1000000000", &max]);
+    // Refused up front: a billion particles (hundreds of GB) were never allocated, nothing
+    // was tracked or written.
+    assert!(t.elapsed().as_secs_f64() < 20.0, "{:?}", t.elapsed());
+    assert!(!f.root.join("billion.csv").exists());
+    assert!(leftovers(&f.root).is_empty(), "{:?}", leftovers(&f.root));
+}
+
+#[test]
+fn demo_refuses_zero_particles_before_training() {
+    let dir = tempfile::tempdir().unwrap();
+    let t = std::time::Instant::now();
+    let o = cli(dir.path(), &["demo", "--dir", "out", "--particles", "0"]);
+    expect_input_error(&o, &["filter.particles", "got 0"]);
+    // Refused before the demo trains its models and renders its video (which take far
+    // longer): it has not even made its folder.
+    assert!(t.elapsed().as_secs_f64() < 20.0, "{:?}", t.elapsed());
+    assert!(!dir.path().join("out").exists());
+    assert!(
+        o.stdout.is_empty(),
+        "{}",
+        String::from_utf8_lossy(&o.stdout)
+    );
+}
+
+/// A trial shorter than the path through the model's states (6 states, max_jump 3: at least
+/// ⌈5 / 3⌉ + 1 = 3 frames) is the user's input: refused naming the file, its action, its frame
+/// count and the minimum, in words (no internal type names); a trial of exactly the minimum
+/// trains.
+#[test]
+fn train_refuses_a_trial_too_short_for_the_model_naming_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    write_trials(d);
+    std::fs::write(
+        d.join("data/reach_12.csv"),
+        trial_csv("reach", [-0.1, 0.7], 2, 0.5, 1.0),
+    )
+    .unwrap();
+    let o = cli(
+        d,
+        &[
+            "train",
+            "--manifest",
+            "train.toml",
+            "-o",
+            "short.actrack.json",
+        ],
+    );
+    expect_input_error(
+        &o,
+        &[
+            "reach_12.csv",
+            "`reach` trial",
+            "has 2 frames",
+            "at least 3 frames",
+            "6 states",
+            "max_jump 3",
+        ],
+    );
+    let err = stderr(&o);
+    for internal in ["EndMode", "MustEnd", "::", "sequence"] {
+        assert!(!err.contains(internal), "`{internal}` in: {err}");
+    }
+    assert!(!d.join("short.actrack.json").exists());
+    // The minimum follows the options: --max-jump 1 needs one frame per state.
+    let o = cli(
+        d,
+        &[
+            "train",
+            "--manifest",
+            "train.toml",
+            "-o",
+            "short.actrack.json",
+            "--max-jump",
+            "1",
+        ],
+    );
+    expect_input_error(&o, &["reach_12.csv", "at least 6 frames", "max_jump 1"]);
+    // Exactly the minimum is enough.
+    std::fs::write(
+        d.join("data/reach_12.csv"),
+        trial_csv("reach", [-0.1, 0.7], 3, 0.5, 1.0),
+    )
+    .unwrap();
+    let o = cli(
+        d,
+        &[
+            "train",
+            "--manifest",
+            "train.toml",
+            "-o",
+            "short.actrack.json",
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(d.join("short.actrack.json").exists());
+    assert!(leftovers(d).is_empty(), "{:?}", leftovers(d));
+}

@@ -250,6 +250,17 @@ impl ValidPhmmParams {
     pub fn params(&self) -> &PhmmParams {
         &self.0
     }
+    /// The fewest frames a training sequence may have: with [`EndMode::MustEnd`], the shortest
+    /// path from the first state to the last with jumps of at most `max_jump`
+    /// (⌈(N − 1) / J⌉ + 1 frames); 1 otherwise. [`ValidPhmmParams::fit`] refuses shorter
+    /// sequences with [`PhmmError::SequenceTooShort`].
+    pub fn min_sequence_len(&self) -> usize {
+        if self.0.end_mode == EndMode::MustEnd {
+            (self.0.n_states - 1).div_ceil(self.0.max_jump.max(1)) + 1
+        } else {
+            1
+        }
+    }
 
     /// Train a model on sequences (each T_m × d, one row per frame) with one θ per sequence in the
     /// caller's units (pass an empty slice for a plain HMM). Initialisation: uniform segmentation
@@ -301,9 +312,9 @@ impl ValidPhmmParams {
         }
         let p = thetas.first().map_or(0, DVector::len);
         let d = model.map_or(seqs[0].ncols(), |m| m.d);
-        let (n, j, end_mode) = match model {
-            Some(m) => (m.n, m.j, m.end_mode),
-            None => (self.0.n_states, self.0.max_jump, self.0.end_mode),
+        let (n, j) = match model {
+            Some(m) => (m.n, m.j),
+            None => (self.0.n_states, self.0.max_jump),
         };
         if let Some(m) = model
             && m.p != p
@@ -314,11 +325,7 @@ impl ValidPhmmParams {
                 got: p,
             });
         }
-        let min_len = match model {
-            Some(m) => m.min_sequence_len(),
-            None if end_mode == EndMode::MustEnd => (n - 1).div_ceil(j.max(1)) + 1,
-            None => 1,
-        };
+        let min_len = model.map_or_else(|| self.min_sequence_len(), Phmm::min_sequence_len);
         for (index, x) in seqs.iter().enumerate() {
             check_sequence_shape(x, index, d, min_len, n, j)?;
         }

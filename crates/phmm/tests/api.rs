@@ -61,12 +61,19 @@ fn bad_input_gives_typed_errors() {
         e.to_string().contains("EndMode::Free"),
         "the message says what to change: {e}"
     );
+    // Callers can check first: the builder knows the minimum.
+    let must_end = |n, j| PhmmParams::new(n).max_jump(j).check().unwrap();
+    assert_eq!(must_end(12, 3).min_sequence_len(), 5);
+    assert_eq!(must_end(20, 3).min_sequence_len(), 8);
+    assert_eq!(must_end(6, 1).min_sequence_len(), 6);
+    assert_eq!(must_end(1, 1).min_sequence_len(), 1);
     // … but fine without the end constraint.
     let free = PhmmParams::new(12)
         .end_mode(EndMode::Free)
         .max_iterations(3)
         .check()
         .unwrap();
+    assert_eq!(free.min_sequence_len(), 1);
     assert!(free.fit(&s, &thetas).is_ok());
     // NaN / inf.
     for bad in [f64::NAN, f64::INFINITY] {
