@@ -118,6 +118,13 @@ pub struct ObservationConfig {
     /// largest Sobel magnitude of R, G and B; not in the paper), so that a boundary between two
     /// colours of the same brightness is an edge too.
     pub gradient: Gradient,
+    /// The widest image the observation model works on, pixels (0: every frame at its own
+    /// size; not in the paper). A wider frame is shrunk by the smallest integer factor that
+    /// brings it within this width (block means), and its camera with it, so the edge image,
+    /// the gate and the likelihood cost the same for a 1280×720 camera as for a 640×360 one
+    /// and see the arm at a similar scale. Estimates stay in the world; outputs keep the
+    /// frame's size.
+    pub max_width: u32,
     /// Score short contours as missing points instead of SPEC's mean ε̄ (not in the paper).
     pub short_contour_penalty: PenaltyConfig,
     /// Divide G by its local maximum (not in SPEC §4.1), so weak but local edges count.
@@ -213,13 +220,14 @@ pub struct GateConfig {
     pub enabled: bool,
     /// Grey-level difference above which a pixel is foreground (0–255 scale).
     pub threshold: f32,
-    /// Half-width of the dilation square, pixels.
+    /// Half-width of the dilation square, pixels (of the image the observation works on, see
+    /// `observation.max_width`).
     pub radius: u32,
     /// G's factor away from the foreground, in [0, 1].
     pub floor: f32,
     /// The background's blending rate per frame, in (0, 1].
     pub rate: f32,
-    /// Pixels around the tracked silhouette that the background does not learn.
+    /// Pixels (as `radius`) around the tracked silhouette that the background does not learn.
     pub margin: f32,
 }
 
@@ -343,6 +351,7 @@ impl Default for ObservationConfig {
             gamma: 0.15,
             gamma_sqrt_views: true,
             gradient: Gradient::Colour,
+            max_width: 640,
             short_contour_penalty: PenaltyConfig::default(),
             local_norm: LocalNormConfig::default(),
             foreground_gate: GateConfig::default(),
@@ -613,6 +622,15 @@ impl TrackConfig {
             1.0,
             "must be in (0, 1]",
         )?;
+        if o.max_width != 0 && !(32..=100_000).contains(&o.max_width) {
+            return Err(bad(
+                "observation.max_width",
+                format!(
+                    "must be 0 (full size) or in [32, 100000] px, got {}",
+                    o.max_width
+                ),
+            ));
+        }
         let g = &o.foreground_gate;
         in_range(
             "observation.foreground_gate.threshold",

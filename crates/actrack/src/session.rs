@@ -19,8 +19,8 @@ use actrack_pf::{
     ActionBalance, CentredMedian, Estimate, ObservationModel, TableRegion, Tracker, TrackerConfig,
 };
 use actrack_render::{
-    ArmGeometry as RenderArm, Camera as RenderCamera, EdgeImage, EdgeWorkspace, ImageView,
-    LikelihoodModel, LocalNorm, LocalNormScratch,
+    ArmGeometry as RenderArm, Camera as RenderCamera, DownscaleBuf, EdgeImage, EdgeWorkspace,
+    ImageView, LikelihoodModel, LocalNorm, LocalNormScratch,
 };
 use image::RgbImage;
 use nalgebra::Vector3;
@@ -73,6 +73,9 @@ pub struct StageTimes {
 /// The edge stage of one view (buffers reused across frames).
 #[derive(Default)]
 struct ViewStage {
+    /// The integer factor the view's frames are shrunk by (1: full size).
+    factor: u32,
+    shrink: DownscaleBuf,
     ws: EdgeWorkspace,
     local: LocalNormScratch,
     spec: EdgeImage,
@@ -85,6 +88,8 @@ pub struct Session {
     scene: Scene,
     config: TrackConfig,
     geometry: RenderArm,
+    /// The cameras of the images the observation works on (shrunk, see
+    /// `observation.max_width`).
     cameras: Vec<RenderCamera>,
     scorer: Scorer,
     device_note: Option<String>,
@@ -180,7 +185,17 @@ impl Session {
             scene,
             [model.arm_lengths.upper_arm, model.arm_lengths.forearm_hand],
         );
-        let cameras: Vec<RenderCamera> = scene.cameras.iter().map(|c| c.model.clone()).collect();
+        let factors: Vec<u32> = scene
+            .cameras
+            .iter()
+            .map(|c| shrink_factor(c.model.width, config.observation.max_width))
+            .collect();
+        let cameras: Vec<RenderCamera> = scene
+            .cameras
+            .iter()
+            .zip(&factors)
+            .map(|(c, &f)| c.model.downscaled(f))
+            .collect();
         let likelihood = LikelihoodModel::new(
             cameras.clone(),
             geometry.clone(),
@@ -213,7 +228,13 @@ impl Session {
             scene: scene.clone(),
             config: config.clone(),
             geometry,
-            views: cameras.iter().map(|_| ViewStage::default()).collect(),
+            views: factors
+                .iter()
+                .map(|&factor| ViewStage {
+                    factor,
+                    ..ViewStage::default()
+                })
+                .collect(),
             edges: cameras.iter().map(|_| EdgeImage::default()).collect(),
             cameras,
             scorer,
@@ -266,7 +287,8 @@ impl Session {
         self.times
     }
 
-    /// The edge images of the last step, one per view.
+    /// The edge images of the last step, one per view, at the size the observation works on
+    /// (see `observation.max_width`).
     pub fn edges(&self) -> &[EdgeImage] {
         &self.edges
     }
@@ -315,11 +337,18 @@ impl Session {
                 )));
             }
             let err = |e: actrack_render::RenderError| Error::Config(format!("frame {frame}: {e}"));
+            let stage = &mut self.views[v];
+            let full = self.scene.edge_params(cam.model.width);
             let params = actrack_render::EdgeParams {
                 colour: obs_cfg.gradient == Gradient::Colour,
-                ..self.scene.edge_params(cam.model.width)
+                sigma: full.sigma / stage.factor as f32,
+                ..full
             };
-            let stage = &mut self.views[v];
+            let img = &if stage.factor > 1 {
+                actrack_render::downscale(*img, stage.factor, &mut stage.shrink).map_err(err)?
+            } else {
+                *img
+            };
             if obs_cfg.local_norm.enabled {
                 stage
                     .ws
@@ -362,9 +391,14 @@ impl Session {
         if gate.enabled {
             let tracked = [&r.best_world, &r.smoothed_world];
             for ((img, cam), stage) in images.iter().zip(&self.cameras).zip(&mut self.views) {
+                let shrunk = stage.shrink.last();
+                let img = match (stage.factor > 1, shrunk) {
+                    (true, Some(s)) => s,
+                    _ => *img,
+                };
                 stage
                     .gate
-                    .update(gate, *img, cam, &self.geometry, &tracked)
+                    .update(gate, img, cam, &self.geometry, &tracked)
                     .map_err(|e| Error::Config(format!("frame {frame}: {e}")))?;
             }
         }
@@ -407,6 +441,15 @@ impl Session {
                 timed_step(&mut self.tracker, obs, self.floor)
             }
         }
+    }
+}
+
+/// The integer factor that brings a frame `width` pixels wide within `max_width` (0: no limit).
+pub fn shrink_factor(width: u32, max_width: u32) -> u32 {
+    if max_width == 0 || width <= max_width {
+        1
+    } else {
+        width.div_ceil(max_width)
     }
 }
 
@@ -552,6 +595,7 @@ mod tests {
             "prior.theta=\"scene\"",
             "observation.contour=\"raster\"",
             "prior.height_scale=0.9",
+            "observation.max_width=80",
         ] {
             let other = run(&s, &config(&[kv]));
             assert_ne!(best(&other), best(&base), "{kv} changed nothing");
@@ -564,6 +608,44 @@ mod tests {
         let mut paper = TrackConfig::preset("paper").unwrap();
         paper.filter.particles = 120;
         assert_eq!(run(&s, &paper).len(), s.frames.len());
+    }
+
+    #[test]
+    fn a_frame_wider_than_max_width_is_tracked_as_its_shrunk_self() {
+        // Every frame blown up ×2 by pixel replication, with its camera: shrunk back by 2, the
+        // session sees exactly the original frames and camera, so the track is bit-identical.
+        let s = small();
+        let mut big = Small {
+            scene: s.scene.clone(),
+            model: s.model.clone(),
+            frames: s
+                .frames
+                .iter()
+                .map(|f| {
+                    image::imageops::resize(
+                        f,
+                        2 * f.width(),
+                        2 * f.height(),
+                        image::imageops::FilterType::Nearest,
+                    )
+                })
+                .collect(),
+        };
+        let cam = &mut big.scene.cameras[0].model;
+        cam.width *= 2;
+        cam.height *= 2;
+        cam.fx *= 2.0;
+        cam.fy *= 2.0;
+        cam.cx = 2.0 * cam.cx + 0.5;
+        cam.cy = 2.0 * cam.cy + 0.5;
+        let c = config(&["observation.max_width=160"]);
+        assert_eq!(best(&run(&big, &c)), best(&run(&s, &c)));
+        let mut session = Session::new(&big.model, &big.scene, &c).unwrap();
+        session.step_rgb(0, &[&big.frames[0]]).unwrap();
+        assert_eq!(session.edges()[0].width(), 160);
+        assert_eq!(shrink_factor(1280, 640), 2);
+        assert_eq!(shrink_factor(1281, 640), 3);
+        assert_eq!(shrink_factor(1920, 0), 1);
     }
 
     #[test]

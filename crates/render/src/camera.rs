@@ -293,11 +293,51 @@ impl Camera {
     pub fn mean_focal(&self) -> f64 {
         0.5 * (self.fx + self.fy)
     }
+
+    /// The camera of its image shrunk by the integer `factor` with [`crate::downscale`]: focal
+    /// lengths divided by `factor`, the principal point moved to the output pixels' centres
+    /// (`(c − (factor − 1)/2)/factor`), size rounded down; distortion and pose unchanged.
+    #[must_use]
+    pub fn downscaled(&self, factor: u32) -> Self {
+        let f = f64::from(factor.max(1));
+        let shift = 0.5 * (f - 1.0);
+        Self {
+            width: self.width / factor.max(1),
+            height: self.height / factor.max(1),
+            fx: self.fx / f,
+            fy: self.fy / f,
+            cx: (self.cx - shift) / f,
+            cy: (self.cy - shift) / f,
+            ..self.clone()
+        }
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn downscaled_camera_projects_onto_the_downscaled_pixels() {
+        let cam = Camera::look_at(
+            Vector3::new(0.5, -2.0, 1.5),
+            Vector3::new(0.0, 0.3, 0.8),
+            Vector3::z(),
+            1280,
+            720,
+            1.1,
+        )
+        .unwrap();
+        let small = cam.downscaled(2);
+        assert_eq!((small.width, small.height), (640, 360));
+        for p in [Vector3::new(0.1, 0.2, 0.9), Vector3::new(-0.3, 0.5, 0.7)] {
+            let big = cam.project(&p).unwrap();
+            let s = small.project(&p).unwrap();
+            // Output pixel j covers input pixels 2j and 2j + 1, centred at 2j + 0.5.
+            assert!((2.0 * s.x + 0.5 - big.x).abs() < 1e-9);
+            assert!((2.0 * s.y + 0.5 - big.y).abs() < 1e-9);
+        }
+    }
     use rand::{Rng, SeedableRng};
 
     fn distorted() -> Camera {

@@ -114,6 +114,104 @@ impl<'a> ImageView<'a> {
     }
 }
 
+/// Buffers of [`downscale`] (reused across frames).
+#[derive(Debug, Default)]
+pub struct DownscaleBuf {
+    bytes: Vec<u8>,
+    floats: Vec<f32>,
+    sums: Vec<u32>,
+    /// The last output's size and channels (3: RGB8, 1: grey8, 0: grey f32).
+    last: Option<(u32, u32, u8)>,
+}
+
+impl DownscaleBuf {
+    /// The image the last [`downscale`] into this buffer returned.
+    pub fn last(&self) -> Option<ImageView<'_>> {
+        let (w, h, c) = self.last?;
+        match c {
+            3 => ImageView::rgb8(&self.bytes, w, h).ok(),
+            1 => ImageView::grey8(&self.bytes, w, h).ok(),
+            _ => ImageView::grey_f32(&self.floats, w, h).ok(),
+        }
+    }
+}
+
+/// `view` shrunk by the integer `factor`: every output pixel is the mean of a `factor`² block
+/// (rounded for 8-bit images); the last `width mod factor` columns and `height mod factor` rows
+/// are dropped. Output pixel j's centre is input coordinate `factor·j + (factor − 1)/2`, which
+/// [`crate::Camera::downscaled`] follows.
+///
+/// # Errors
+/// [`RenderError::InvalidImage`] when `factor` is 0 or larger than a side of the image.
+pub fn downscale<'b>(
+    view: ImageView<'_>,
+    factor: u32,
+    buf: &'b mut DownscaleBuf,
+) -> Result<ImageView<'b>, RenderError> {
+    view.validate()?;
+    let (w, h) = view.size();
+    if factor == 0 || factor > w || factor > h {
+        return Err(RenderError::InvalidImage(format!(
+            "cannot shrink a {w}×{h} image by {factor}"
+        )));
+    }
+    buf.last = None;
+    let (f, w, h) = (factor as usize, w as usize, h as usize);
+    let (ow, oh) = (w / f, h / f);
+    let channels = match view {
+        ImageView::Rgb8 { .. } => 3,
+        _ => 1,
+    };
+    let n = (f * f) as u32;
+    match view {
+        ImageView::Rgb8 { data, .. } | ImageView::Grey8 { data, .. } => {
+            buf.bytes.clear();
+            buf.bytes.reserve(ow * oh * channels);
+            for oy in 0..oh {
+                buf.sums.clear();
+                buf.sums.resize(ow * channels, 0);
+                for y in oy * f..oy * f + f {
+                    let row = &data[y * w * channels..(y * w + ow * f) * channels];
+                    for (x, px) in row.chunks_exact(channels).enumerate() {
+                        let o = (x / f) * channels;
+                        for (s, &v) in buf.sums[o..o + channels].iter_mut().zip(px) {
+                            *s += u32::from(v);
+                        }
+                    }
+                }
+                // Rounded to nearest; the mean of bytes fits a byte.
+                #[allow(clippy::cast_possible_truncation)]
+                buf.bytes
+                    .extend(buf.sums.iter().map(|&s| ((s + n / 2) / n) as u8));
+            }
+            let (ow, oh) = (ow as u32, oh as u32);
+            buf.last = Some((ow, oh, channels as u8));
+            if channels == 3 {
+                ImageView::rgb8(&buf.bytes, ow, oh)
+            } else {
+                ImageView::grey8(&buf.bytes, ow, oh)
+            }
+        }
+        ImageView::GreyF32 { data, .. } => {
+            buf.floats.clear();
+            buf.floats.resize(ow * oh, 0.0);
+            for oy in 0..oh {
+                for y in oy * f..oy * f + f {
+                    for (x, &v) in data[y * w..y * w + ow * f].iter().enumerate() {
+                        buf.floats[oy * ow + x / f] += v;
+                    }
+                }
+            }
+            let inv = 1.0 / n as f32;
+            for v in &mut buf.floats {
+                *v *= inv;
+            }
+            buf.last = Some((ow as u32, oh as u32, 0));
+            ImageView::grey_f32(&buf.floats, ow as u32, oh as u32)
+        }
+    }
+}
+
 /// An owned RGB8 image (interleaved, row-major), e.g. a synthesised frame.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct ImageRgb8 {
@@ -151,5 +249,52 @@ impl ImageRgb8 {
         }
         let i = 3 * (v as usize * self.width as usize + u as usize);
         Some([self.data[i], self.data[i + 1], self.data[i + 2]])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn downscale_averages_blocks_and_drops_the_remainder() {
+        // 5×3 RGB: shrunk by 2 to 2×1 (the last column and row are dropped).
+        let data: Vec<u8> = (0..45u8).collect();
+        let mut buf = DownscaleBuf::default();
+        let out = downscale(ImageView::rgb8(&data, 5, 3).unwrap(), 2, &mut buf).unwrap();
+        assert_eq!(out.size(), (2, 1));
+        let out = buf.last().unwrap();
+        let ImageView::Rgb8 { data: got, .. } = out else {
+            panic!("not RGB");
+        };
+        // Brute force: the rounded mean of each block's channel.
+        let px = |x: usize, y: usize, c: usize| u32::from(data[3 * (y * 5 + x) + c]);
+        for ox in 0..2 {
+            for c in 0..3 {
+                let s: u32 = (0..2)
+                    .flat_map(|dy| (0..2).map(move |dx| (2 * ox + dx, dy)))
+                    .map(|(x, y)| px(x, y, c))
+                    .sum();
+                assert_eq!(u32::from(got[3 * ox + c]), (s + 2) / 4);
+            }
+        }
+        let grey: Vec<f32> = (0..12).map(|v| v as f32).collect();
+        let out = downscale(ImageView::grey_f32(&grey, 4, 3).unwrap(), 3, &mut buf).unwrap();
+        let ImageView::GreyF32 { data: got, .. } = out else {
+            panic!("not f32");
+        };
+        assert_eq!(
+            got,
+            &[(0.0 + 1.0 + 2.0 + 4.0 + 5.0 + 6.0 + 8.0 + 9.0 + 10.0) / 9.0]
+        );
+    }
+
+    #[test]
+    fn downscale_rejects_factors_that_leave_nothing() {
+        let data = [0u8; 12];
+        let mut buf = DownscaleBuf::default();
+        for f in [0, 5] {
+            assert!(downscale(ImageView::grey8(&data, 4, 3).unwrap(), f, &mut buf).is_err());
+        }
     }
 }

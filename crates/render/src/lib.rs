@@ -75,7 +75,7 @@ pub use edge::{EdgeImage, EdgeParams, EdgeWorkspace, grey_image};
 pub use error::RenderError;
 #[cfg(feature = "gpu")]
 pub use gpu::{GpuError, GpuLikelihood};
-pub use image::{ImageRgb8, ImageView};
+pub use image::{DownscaleBuf, ImageRgb8, ImageView, downscale};
 pub use likelihood::{LikelihoodModel, SamplingMode};
 pub use local_norm::{
     DilateScratch, LocalNorm, LocalNormScratch, dilate_mask, local_normalise, max_filter,
