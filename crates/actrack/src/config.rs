@@ -10,7 +10,12 @@
 //! [`TrackConfig::check`] validates the values and names the offending key, so the tracker
 //! ([`crate::Session`]) only ever sees a valid configuration. Single keys are overridden with
 //! [`TrackConfig::set`] (`track --set filter.particles=800`).
+//!
+//! The fields' doc comments are the user's reference: [`schemars::JsonSchema`] carries them into
+//! the configuration's JSON Schema, from which docs/configuration.md's table of keys is generated
+//! (crates/actrack/tests/configuration_doc.rs). They say what a key does and why, for a user.
 
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
@@ -27,7 +32,7 @@ pub const PRESETS: [(&str, &str); 2] = [
 pub const MAX_PARTICLES: usize = 1 << 20;
 
 /// Every choice that changes a track.
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct TrackConfig {
     /// The particle filter in action space (SPEC §3).
@@ -43,107 +48,108 @@ pub struct TrackConfig {
 }
 
 /// The particle filter (SPEC §3).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct FilterConfig {
-    /// Particles M.
+    /// The number of particles M, in [1, 1048576]. More particles follow the arm more
+    /// reliably, and each costs time in every frame.
     pub particles: usize,
-    /// Seed of every random draw of the filter.
+    /// The seed of every random draw of the filter: the same seed, configuration and input give
+    /// the same track, whatever the number of threads.
     pub seed: u64,
-    /// σ(N)/σ(0) of the cooling schedule of θ's diffusion (SPEC §3.3, erratum E1: decreasing);
-    /// 1 = no cooling.
+    /// σ(N)/σ(0), in (0, 1]: how much the diffusion of θ cools from a model's first state to its
+    /// last (SPEC §3.3, decreasing as its erratum E1 reads it), so that θ settles as the action
+    /// nears its target; 1 = no cooling.
     pub sigma_end_ratio: f64,
     /// The fraction ε ∈ [0, 1) of the particles split evenly over the actions at each
     /// resampling, whatever their posterior, so that a less probable action stays tracked and in
     /// phase; 0 resamples the joint set (SPEC §3.6 literally).
     pub action_floor: f64,
-    /// Probability per frame, in [0, 0.5), that the action label may change (a Markov chain
-    /// on the action, applied to the carried action posterior with `action_floor` > 0; not in
-    /// the paper): frames that carry little action information, such as the rest pose, cannot
-    /// drive a later-discriminated action's posterior to zero before its movement starts.
+    /// The probability per frame, in [0, 0.5), that the action label changes: a Markov chain on
+    /// the action, mixed into the carried action posterior when `action_floor` > 0 (not in the
+    /// paper). Frames that carry little action information, such as the rest pose, then cannot
+    /// rule an action out before its movement starts.
     pub action_switch: f64,
-    /// Cap on every model state's self-transition probability, in (0, 1] (not in the paper;
-    /// 1 = the models' own dwell times): no state is expected to last longer than
-    /// 1/(1 − max_stay) frames, so a subject who moves faster than the demonstrators is not
-    /// left behind.
+    /// A cap, in (0, 1], on every model state's self-transition probability (not in the paper):
+    /// no state is expected to last longer than 1/(1 − max_stay) frames, so a subject who moves
+    /// faster than the demonstrators is not left behind; 1 keeps the models' own dwell times.
     pub max_stay: f64,
-    /// With `max_stay` < 1: each model's last state keeps its trained dwell (the
-    /// demonstrations end at rest, and a finished action stays finished).
+    /// With `max_stay` < 1: each model's last state keeps its trained dwell, so a finished
+    /// action stays finished (the demonstrations end at rest).
     pub keep_last_dwell: bool,
-    /// Per-particle speed range [s_min, s_max] (transition draws per frame, log-uniform per
-    /// action instance; not in the paper); empty: every particle follows the models' timing.
+    /// A per-particle speed range `[s_min, s_max]`, 0 < s_min ≤ s_max, in model transitions per
+    /// frame (not in the paper): each particle draws its speed log-uniformly per action
+    /// instance, so that people faster or slower than the demonstrators are followed; `[]`:
+    /// every particle follows the models' timing.
     pub speed_range: Vec<f64>,
 }
 
 /// The θ prior and the models.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct PriorConfig {
-    /// Where each action draws θ: `training` (the box of its own training targets, padded by
-    /// `theta_pad` and clipped to the scene's table region; a linear parametric HMM far outside
-    /// its training targets generates implausible poses) or `scene` (the scene's table region
-    /// for every action, SPEC §3.2 literally).
+    /// Where each action draws its target θ (SPEC §3.2).
     pub theta: ThetaPrior,
-    /// Padding of the `training` θ prior around the training targets, metres.
+    /// The padding of the `training` θ prior around each action's training targets, metres, in
+    /// [0, 10].
     pub theta_pad: f64,
-    /// Factor on the models' vertical outputs for an actor whose table lies nearer to or
-    /// farther from the shoulder than the demonstrators' (1 = the models' heights).
+    /// A factor (> 0) on the models' vertical outputs, for an actor whose table lies nearer to
+    /// or farther from the shoulder than the demonstrators'; 1 keeps the models' heights.
     pub height_scale: f64,
 }
 
 /// The θ prior of every action.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum ThetaPrior {
-    /// Each action's own training targets, padded, clipped to the table region.
+    /// The box of the action's own training targets, padded by `prior.theta_pad` and clipped to
+    /// the scene's table region: a linear parametric HMM far outside its training targets
+    /// generates implausible poses.
     #[default]
     Training,
-    /// The scene's table region for every action (SPEC §3.2).
+    /// The scene's table region for every action (SPEC §3.2 literally).
     Scene,
 }
 
 /// The observation model (SPEC §4) and its extensions.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct ObservationConfig {
-    /// How a pose's contour is found: `raster` (SPEC §4.2's normative silhouette boundary) or
-    /// `analytic` (points along each part's projected outline; much cheaper).
+    /// How a pose's contour, the points its likelihood is scored on, is found.
     pub contour: Contour,
-    /// γ of SPEC Eq. 3 for one view.
+    /// γ of SPEC Eq. 3 for one view, > 0: log P(I | x̃) = −ε̄ / (2γ²), so a smaller γ sharpens
+    /// the likelihood.
     pub gamma: f64,
     /// Scale γ by √V for V views: the views' errors add up, and without it every extra view
     /// sharpens the likelihood by another factor.
     pub gamma_sqrt_views: bool,
-    /// The image gradient of the edge map G: `grey` (SPEC §4.1) or `colour` (per pixel the
-    /// largest Sobel magnitude of R, G and B; not in the paper), so that a boundary between two
-    /// colours of the same brightness is an edge too.
+    /// The image gradient the edge map G is computed from.
     pub gradient: Gradient,
-    /// The widest image the observation model works on, pixels (0: every frame at its own
-    /// size; not in the paper). A wider frame is shrunk by the smallest integer factor that
-    /// brings it within this width (block means), and its camera with it, so the edge image,
-    /// the gate and the likelihood cost the same for a 1280×720 camera as for a 640×360 one
-    /// and see the arm at a similar scale. Estimates stay in the world; outputs keep the
-    /// frame's size.
+    /// The widest image the observation model works on, pixels: 0 or in [32, 100000] (not in
+    /// the paper). A wider frame is shrunk by the smallest integer factor that brings it within
+    /// this width (block means), and its camera with it, so the edge image, the gate and the
+    /// likelihood cost the same for a 1280×720 camera as for a 640×360 one and see the arm at a
+    /// similar scale. The foreground gate's `radius` and `margin` count pixels of the shrunk
+    /// image; estimates stay in the world, and outputs keep the frame's size. 0 keeps every
+    /// frame at its own size.
     pub max_width: u32,
-    /// Score short contours as missing points instead of SPEC's mean ε̄ (not in the paper).
+    /// The short-contour penalty, which replaces SPEC's mean error ε̄ (not in the paper).
     pub short_contour_penalty: PenaltyConfig,
-    /// Divide G by its local maximum (not in SPEC §4.1), so weak but local edges count.
+    /// The local normalisation of G (not in SPEC §4.1).
     pub local_norm: LocalNormConfig,
-    /// Multiply G by a foreground mask against a background the tracker keeps (not in SPEC
-    /// §4.1), so that what does not move stops attracting the contour.
+    /// The foreground gate on G (not in SPEC §4.1).
     pub foreground_gate: GateConfig,
-    /// Where the batch likelihood runs: `cpu`, `gpu` (wgpu, feature `gpu`; analytic contours
-    /// and SPEC's ε̄ only) or `auto` (a hardware GPU when there is one, else the CPU).
+    /// Where the batch likelihood of the particles is computed.
     pub device: Device,
 }
 
 /// The contour method of the likelihood.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum Contour {
-    /// SPEC §4.2: the inner boundary of the rasterised silhouette.
+    /// The inner boundary of the rasterised silhouette (SPEC §4.2, normative).
     Raster,
-    /// Points every 2 px along each part's projected outline.
+    /// Points every 2 px along each part's projected outline: much cheaper than rasterising.
     #[default]
     Analytic,
 }
@@ -158,26 +164,29 @@ impl From<Contour> for actrack_render::ContourMethod {
 }
 
 /// The image gradient the edge map is computed from.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum Gradient {
-    /// SPEC §4.1: the Sobel magnitude of the grey image (0.299 R + 0.587 G + 0.114 B).
+    /// The Sobel magnitude of the grey image, 0.299 R + 0.587 G + 0.114 B (SPEC §4.1).
     Grey,
-    /// The largest Sobel magnitude of the three colour channels.
+    /// Per pixel the largest Sobel magnitude of R, G and B (not in the paper), so that a
+    /// boundary between two colours of the same brightness is an edge too.
     #[default]
     Colour,
 }
 
 /// Where the batch likelihood is computed.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum Device {
-    /// rayon over particles.
+    /// The CPU, the particles spread over its threads.
     #[default]
     Cpu,
-    /// wgpu compute shaders; an error when there is no adapter.
+    /// wgpu compute shaders (feature `gpu`; analytic contours and SPEC's ε̄ only); an error
+    /// when there is no adapter.
     Gpu,
-    /// A hardware GPU when there is one, else the CPU (a software adapter is slower).
+    /// A hardware GPU when there is one, else the CPU (a software adapter is slower than the
+    /// CPU path).
     Auto,
 }
 
@@ -185,26 +194,31 @@ pub enum Device {
 /// of the frame's particle set, counts each missing point with error λ:
 /// ε = (Σ (1 − G)² + λ·max(0, n̄ − n)) / max(n, n̄). A mean over the contour (SPEC's ε̄) lets a
 /// short, foreshortened contour win on a few strong edges of the torso.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct PenaltyConfig {
-    /// Whether the penalty replaces SPEC's ε̄.
+    /// Replace SPEC's mean error ε̄ by the short-contour penalty: a pose whose contour has n
+    /// points, fewer than the q-quantile n̄ of the frame's particle set, counts each missing
+    /// point with error λ, ε = (Σ (1 − G)² + λ·max(0, n̄ − n)) / max(n, n̄). With the mean, a
+    /// short, foreshortened contour wins on a few strong edges of the torso.
     pub enabled: bool,
-    /// λ, the error of a missing point, in [0, 1].
+    /// λ, in [0, 1]: the error each missing point of a short contour counts.
     pub weight: f64,
-    /// q, the quantile of the particle set's contour lengths, in [0, 1].
+    /// q, in [0, 1]: the quantile of the frame's particle set's contour lengths that sets n̄,
+    /// the length below which a contour counts missing points.
     pub quantile: f64,
 }
 
 /// The local normalisation of G: G / max(floor, max of G in a (2R + 1)² window).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct LocalNormConfig {
-    /// Whether G is normalised.
+    /// Divide the edge image G by its local maximum, G / max(`floor`, max of G in the
+    /// (2R + 1)² window around each pixel), so that weak but local edges count.
     pub enabled: bool,
-    /// R, pixels.
+    /// R, pixels, in [1, 10000]: the half-width of the window whose maximum divides G.
     pub radius: u32,
-    /// The divisor's floor, in (0, 1].
+    /// The divisor's floor, in (0, 1]: weak edges far from any strong one are not raised to 1.
     pub floor: f32,
 }
 
@@ -213,35 +227,40 @@ pub struct LocalNormConfig {
 /// G' = G · (floor + (1 − floor) · mask). The background starts from the first frame and after
 /// each frame blends in B ← B + rate · (I − B) away from the tracked arm (`margin` pixels
 /// around its silhouette), so the arm is not learnt as background while the track follows it.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct GateConfig {
-    /// Whether G is gated.
+    /// Multiply the edge image G by a foreground mask against a background the tracker keeps,
+    /// G' = G · (floor + (1 − floor) · mask), so that what does not move stops attracting the
+    /// contour. The background starts from the first frame and learns from each frame away from
+    /// the tracked arm.
     pub enabled: bool,
-    /// Grey-level difference above which a pixel is foreground (0–255 scale).
+    /// The grey-level difference from the background, in [0, 255], above which a pixel is
+    /// foreground.
     pub threshold: f32,
-    /// Half-width of the dilation square, pixels (of the image the observation works on, see
-    /// `observation.max_width`).
+    /// The half-width of the square the foreground mask is dilated by, pixels of the image the
+    /// observation works on (see `observation.max_width`), in [0, 10000].
     pub radius: u32,
-    /// G's factor away from the foreground, in [0, 1].
+    /// G's factor away from the foreground, in [0, 1]: 0 removes the edges there, 1 keeps them.
     pub floor: f32,
-    /// The background's blending rate per frame, in (0, 1].
+    /// The background's learning rate per frame, in (0, 1]: after each frame,
+    /// B ← B + rate · (I − B) away from the tracked arm.
     pub rate: f32,
-    /// Pixels (as `radius`) around the tracked silhouette that the background does not learn.
+    /// The pixels (as `radius`) around the tracked silhouette that the background does not
+    /// learn, in [0, 10000], so that the arm is not learnt as background while the track
+    /// follows it.
     pub margin: f32,
 }
 
 /// What is known of the actor.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct ActorConfig {
-    /// A soft floor under the fingertip (the hand rests on the table and cannot go through it):
-    /// `off`, `table` (the scene's table surface) or a height in metres in the actor frame
-    /// (negative: below the shoulder). In a monocular view a hand lower and nearer the body can
-    /// lie on the same viewing ray as the true one; the floor rules out the part under the
-    /// table.
+    /// A soft floor under the fingertip, since the hand rests on the table and cannot go through
+    /// it (not in the paper). In a monocular view a hand lower and nearer the body can lie on the
+    /// same viewing ray as the true one; the floor rules out the part under the table.
     pub fingertip_floor: FloorSetting,
-    /// The floor's softness σ, metres: a fingertip d below the floor loses ½(d/σ)² of
+    /// The floor's softness σ, metres, > 0: a fingertip d below the floor loses ½(d/σ)² of
     /// log-likelihood.
     pub floor_sigma: f64,
 }
@@ -254,7 +273,7 @@ pub enum FloorSetting {
     /// The scene's table surface ([`crate::scene::Scene::table_height`]).
     #[default]
     Table,
-    /// A height in metres, actor frame.
+    /// A height in metres in the actor frame (negative: below the shoulder), within ±10 m.
     Height(f64),
 }
 
@@ -289,29 +308,55 @@ impl<'de> Deserialize<'de> for FloorSetting {
     }
 }
 
+/// The schema of the TOML form above: `"off"`, `"table"` or a number. Written by hand, as the
+/// serde form is; its descriptions are the variants' doc comments.
+impl JsonSchema for FloorSetting {
+    fn schema_name() -> std::borrow::Cow<'static, str> {
+        "FloorSetting".into()
+    }
+
+    fn json_schema(_: &mut schemars::SchemaGenerator) -> schemars::Schema {
+        schemars::json_schema!({
+            "description": "Where the fingertip floor lies.",
+            "oneOf": [
+                { "type": "string", "const": "off", "description": "No floor." },
+                {
+                    "type": "string",
+                    "const": "table",
+                    "description": "The scene's table surface."
+                },
+                {
+                    "type": "number",
+                    "description": "A height in metres in the actor frame (negative: below the shoulder), within ±10 m."
+                }
+            ]
+        })
+    }
+}
+
 /// What the outputs report.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct OutputConfig {
-    /// The median filter of the reported pose over time (SPEC §3.7): `causal` (frame t from
-    /// frames t − W + 1 … t; known at once, for live video) or `centred` (frames t − h … t + h,
-    /// W = 2h + 1; each frame is reported h frames later, and the pose is more accurate).
+    /// The median filter over time that gives the reported pose from the best particle's
+    /// (SPEC §3.7).
     pub median: Median,
-    /// W, frames (odd when centred).
+    /// W, the median's window in frames, in [1, 1001]; odd when centred.
     pub median_window: usize,
-    /// Particles drawn per frame on the MCAP topic `/actrack/particles` (the θ cloud), as a
-    /// systematic sample of the filter's particles; 0 leaves the cloud out. Writing every
-    /// particle costs more than tracking it.
+    /// The particles drawn per frame on the MCAP topic `/actrack/particles` (the θ cloud), at
+    /// most 1000000: a systematic sample of the filter's particles, in which each action keeps
+    /// its share; 0 leaves the cloud out. Writing every particle costs more than tracking it.
     pub mcap_particles: usize,
 }
 
 /// The kind of median filter of the reported pose.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum Median {
-    /// Frames t − W + 1 … t.
+    /// Frame t from frames t − W + 1 … t: known at once, for live video.
     Causal,
-    /// Frames t − h … t + h.
+    /// Frame t from frames t − h … t + h, W = 2h + 1: each frame is reported h frames later,
+    /// and the pose is more accurate.
     #[default]
     Centred,
 }
@@ -779,37 +824,6 @@ impl TrackConfig {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// The dotted keys of a TOML table (`filter.particles`, …).
-    fn keys(prefix: &str, t: &toml::Table, out: &mut Vec<String>) {
-        for (k, v) in t {
-            let key = if prefix.is_empty() {
-                k.clone()
-            } else {
-                format!("{prefix}.{k}")
-            };
-            match v {
-                toml::Value::Table(sub) => keys(&key, sub, out),
-                _ => out.push(key),
-            }
-        }
-    }
-
-    /// docs/configuration.md has one row per key of `TrackConfig`, and no other.
-    #[test]
-    fn the_reference_lists_every_key() {
-        let doc = include_str!("../../../docs/configuration.md");
-        let documented: std::collections::BTreeSet<&str> = doc
-            .lines()
-            .filter_map(|l| l.strip_prefix("| `"))
-            .filter_map(|l| l.split('`').next())
-            .collect();
-        let table: toml::Table = toml::from_str(&TrackConfig::default().to_toml()).unwrap();
-        let mut all = Vec::new();
-        keys("", &table, &mut all);
-        let all: std::collections::BTreeSet<&str> = all.iter().map(String::as_str).collect();
-        assert_eq!(documented, all, "docs/configuration.md against TrackConfig");
-    }
 
     #[test]
     fn the_default_preset_is_the_default() {
