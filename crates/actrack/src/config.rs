@@ -430,7 +430,7 @@ impl Default for GateConfig {
         Self {
             enabled: true,
             threshold: 10.0,
-            radius: 6,
+            radius: 2,
             floor: 0.2,
             rate: 0.1,
             margin: 8.0,
