@@ -27,6 +27,11 @@ pub mod style;
 pub mod synth;
 pub mod track_csv;
 pub mod train;
+/// The numeric kernels the facade is built on, for users who need them directly (the HMM and
+/// PHMM, the renderer and edge image, the action-space particle filter).
+pub use actrack_pf as pf;
+pub use actrack_phmm as phmm;
+pub use actrack_render as render;
 pub use config::TrackConfig;
 pub use error::{Error, Result};
 pub use model::ActionModel;

@@ -35,7 +35,7 @@ pub(crate) fn os_error(path: &Path, err: &std::io::Error, message: String) -> Py
 }
 
 /// A parametric-HMM error is always the caller's input (shapes, values, parameters).
-pub(crate) fn phmm_error(e: &actrack_phmm::PhmmError) -> PyErr {
+pub(crate) fn phmm_error(e: &actrack::phmm::PhmmError) -> PyErr {
     value_error(e.to_string())
 }
 

@@ -1,13 +1,13 @@
 //! `actrack.Hmm` and `actrack.Phmm`: the left-right Gaussian HMM and the linear parametric HMM
 //! of `actrack-phmm`, numpy in and out.
 //!
-//! Both classes wrap an [`actrack_phmm::Phmm`] (a plain HMM is one whose θ has dimension 0), so
+//! Both classes wrap an [`actrack::phmm::Phmm`] (a plain HMM is one whose θ has dimension 0), so
 //! they share one file format and one set of helpers; `Hmm` simply has no θ arguments. Heavy
 //! calls (fit, inference, θ estimation, sampling) release the GIL.
 
 use std::path::PathBuf;
 
-use actrack_phmm::{
+use actrack::phmm::{
     CovarianceKind, EndMode, FitReport, Phmm, PhmmParams, ThetaEmOptions, ThetaEstimate,
 };
 use nalgebra::{DMatrix, DVector};
