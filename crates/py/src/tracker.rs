@@ -11,9 +11,9 @@ use std::sync::atomic::AtomicBool;
 
 use actrack::frames::{FrameOptions, FrameSource};
 use actrack::pipeline::{TrackOutputs, centred_median as pipeline_centred_median, track};
+use actrack::render::{ContourMethod, EdgeImage, EdgeWorkspace, ImageView, LikelihoodModel};
 use actrack::scene::{edge_params, render_arm};
 use actrack::{FrameResult, Session, TrackConfig};
-use actrack::render::{ContourMethod, EdgeImage, EdgeWorkspace, ImageView, LikelihoodModel};
 use image::RgbImage;
 use numpy::ndarray::{Array1, Array2};
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArrayDyn, PyUntypedArrayMethods};

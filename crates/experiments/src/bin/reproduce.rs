@@ -361,14 +361,16 @@ fn write_docs(
          raster contours, SPEC's ε̄, one θ region for every action, joint resampling, causal \
          5-frame median). `default` is what `actrack-cli track` runs with no flags \
          (`presets/default.toml`, docs/configuration.md): 3200 particles with analytic \
-         contours, edge maps from the colour gradient, the short-contour penalty, a causal foreground gate, the fingertip floor on \
-         the scene's table, a cap of 0.8 on the models' dwell (last state kept), 90 % of the \
-         particles split evenly over the actions, each action's θ prior its training targets, \
+         contours, edge maps from the colour gradient, the short-contour penalty, a causal \
+         foreground gate dilated by 2 px, frames wider than 640 px shrunk to fit (these videos \
+         are 640 px wide), the fingertip floor on the scene's table, a cap of 0.8 on the \
+         models' dwell (last state kept), 90 % of the particles split evenly over the actions, each action's θ prior its training targets, \
          and the pose reported as the centred 7-frame median (3 frames, 0.1 s, of latency; the \
          causal row is the live-video figure). Each of these was chosen on the training \
          subjects ADL001–004 and ADL006–007 rendered the same way (the colour gradient on \
-         ADL001–007 in randomised scene styles, see Generalisation below), never on the test \
-         subjects; the ablations below show what each is worth here.\n\
+         ADL001–007 in randomised scene styles, and with it the gate's dilation and the 640 px \
+         width, see Generalisation below), never on the test subjects; the ablations below \
+         show what each is worth here.\n\
          * **Metrics** (SPEC §5.4): per-component RMSE / MAE over all frames; table error = mean \
          |r̂ − r| per component at each instance's frame of maximal extension; recognition = \
          argmax posterior at the instance's last frame; ms / frame = the session's step (edge \
