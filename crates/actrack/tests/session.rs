@@ -2,6 +2,9 @@
 //! the track, a shrunk frame tracks as its small self, the table floor, bad frames and the
 //! centred report.
 
+// Test fixtures: a failure is a panic with the error.
+#![allow(clippy::unwrap_used)]
+
 use actrack::ActionModel;
 use actrack::Scene;
 use actrack::TrackConfig;
