@@ -673,6 +673,19 @@ fn demo_refuses_zero_particles_before_training() {
     );
 }
 
+/// `train` on the manifest of [`write_trials`] in `d` into `short.actrack.json`.
+fn train_short(d: &Path, extra: &[&str]) -> Output {
+    let mut args = vec![
+        "train",
+        "--manifest",
+        "train.toml",
+        "-o",
+        "short.actrack.json",
+    ];
+    args.extend_from_slice(extra);
+    cli(d, &args)
+}
+
 /// A trial shorter than the path through the model's states (6 states, max_jump 3: at least
 /// ⌈5 / 3⌉ + 1 = 3 frames) is the user's input: refused naming the file, its action, its frame
 /// count and the minimum, in words (no internal type names); a trial of exactly the minimum
@@ -687,16 +700,7 @@ fn train_refuses_a_trial_too_short_for_the_model_naming_it() {
         trial_csv("reach", [-0.1, 0.7], 2, 0.5, 1.0),
     )
     .unwrap();
-    let o = cli(
-        d,
-        &[
-            "train",
-            "--manifest",
-            "train.toml",
-            "-o",
-            "short.actrack.json",
-        ],
-    );
+    let o = train_short(d, &[]);
     expect_input_error(
         &o,
         &[
@@ -714,18 +718,7 @@ fn train_refuses_a_trial_too_short_for_the_model_naming_it() {
     }
     assert!(!d.join("short.actrack.json").exists());
     // The minimum follows the options: --max-jump 1 needs one frame per state.
-    let o = cli(
-        d,
-        &[
-            "train",
-            "--manifest",
-            "train.toml",
-            "-o",
-            "short.actrack.json",
-            "--max-jump",
-            "1",
-        ],
-    );
+    let o = train_short(d, &["--max-jump", "1"]);
     expect_input_error(&o, &["reach_12.csv", "at least 6 frames", "max_jump 1"]);
     // Exactly the minimum is enough.
     std::fs::write(
@@ -733,16 +726,7 @@ fn train_refuses_a_trial_too_short_for_the_model_naming_it() {
         trial_csv("reach", [-0.1, 0.7], 3, 0.5, 1.0),
     )
     .unwrap();
-    let o = cli(
-        d,
-        &[
-            "train",
-            "--manifest",
-            "train.toml",
-            "-o",
-            "short.actrack.json",
-        ],
-    );
+    let o = train_short(d, &[]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(d.join("short.actrack.json").exists());
     assert!(leftovers(d).is_empty(), "{:?}", leftovers(d));
