@@ -148,7 +148,7 @@ pub struct Appearance {
     pub table_pattern: TablePattern,
     /// Amplitude of the torso's and head's sway, metres (0: still).
     pub sway: f64,
-    /// Draws the other arm, resting on the table (needs [`Body::other_shoulder`]).
+    /// Draws the other arm, resting on the table (needs [`Body::other_arm`]).
     pub other_arm: bool,
     /// Global brightness factor (exposure; 1 = as drawn).
     pub gain: f64,
