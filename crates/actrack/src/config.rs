@@ -431,7 +431,7 @@ impl Default for GateConfig {
             enabled: true,
             threshold: 10.0,
             radius: 2,
-            floor: 0.2,
+            floor: 0.1,
             rate: 0.1,
             margin: 8.0,
         }
