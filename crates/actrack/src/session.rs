@@ -190,6 +190,14 @@ impl Session {
             .iter()
             .map(|c| shrink_factor(c.model.width, config.observation.max_width))
             .collect();
+        for (c, &f) in scene.cameras.iter().zip(&factors) {
+            if c.model.height / f == 0 {
+                return Err(Error::Config(format!(
+                    "observation.max_width = {}: camera `{}` ({}×{}) would be shrunk by {f} to                      nothing; raise max_width or set it to 0",
+                    config.observation.max_width, c.name, c.model.width, c.model.height
+                )));
+            }
+        }
         let cameras: Vec<RenderCamera> = scene
             .cameras
             .iter()

@@ -133,6 +133,16 @@ fn a_frame_wider_than_max_width_is_tracked_as_its_shrunk_self() {
     let mut session = Session::new(&big.model, &big.scene, &c).unwrap();
     session.step_rgb(0, &[&big.frames[0]]).unwrap();
     assert_eq!(session.edges()[0].width(), 160);
+    // A frame the factor would shrink to nothing is refused naming the key.
+    let flat = default_scene(400, 4);
+    let e = Session::new(&s.model, &flat, &config(&["observation.max_width=32"]))
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        e.contains("observation.max_width") && e.contains("400×4"),
+        "{e}"
+    );
     assert_eq!(shrink_factor(1280, 640), 2);
     assert_eq!(shrink_factor(1281, 640), 3);
     assert_eq!(shrink_factor(1920, 0), 1);
