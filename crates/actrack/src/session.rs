@@ -399,11 +399,8 @@ impl Session {
         if gate.enabled {
             let tracked = [&r.best_world, &r.smoothed_world];
             for ((img, cam), stage) in images.iter().zip(&self.cameras).zip(&mut self.views) {
-                let shrunk = stage.shrink.last();
-                let img = match (stage.factor > 1, shrunk) {
-                    (true, Some(s)) => s,
-                    _ => *img,
-                };
+                // The shrunk frame the edge stage made, if the view is shrunk.
+                let img = stage.shrink.last().unwrap_or(*img);
                 stage
                     .gate
                     .update(gate, img, cam, &self.geometry, &tracked)

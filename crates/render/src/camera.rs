@@ -317,27 +317,6 @@ impl Camera {
 mod tests {
     use super::*;
 
-    #[test]
-    fn downscaled_camera_projects_onto_the_downscaled_pixels() {
-        let cam = Camera::look_at(
-            Vector3::new(0.5, -2.0, 1.5),
-            Vector3::new(0.0, 0.3, 0.8),
-            Vector3::z(),
-            1280,
-            720,
-            1.1,
-        )
-        .unwrap();
-        let small = cam.downscaled(2);
-        assert_eq!((small.width, small.height), (640, 360));
-        for p in [Vector3::new(0.1, 0.2, 0.9), Vector3::new(-0.3, 0.5, 0.7)] {
-            let big = cam.project(&p).unwrap();
-            let s = small.project(&p).unwrap();
-            // Output pixel j covers input pixels 2j and 2j + 1, centred at 2j + 0.5.
-            assert!((2.0 * s.x + 0.5 - big.x).abs() < 1e-9);
-            assert!((2.0 * s.y + 0.5 - big.y).abs() < 1e-9);
-        }
-    }
     use rand::{Rng, SeedableRng};
 
     fn distorted() -> Camera {
@@ -501,5 +480,27 @@ mod tests {
         // contract only checks that the derive compiles with default distortion.
         fn assert_serde<T: Serialize + for<'de> Deserialize<'de>>() {}
         assert_serde::<Camera>();
+    }
+
+    #[test]
+    fn downscaled_camera_projects_onto_the_downscaled_pixels() {
+        let cam = Camera::look_at(
+            Vector3::new(0.5, -2.0, 1.5),
+            Vector3::new(0.0, 0.3, 0.8),
+            Vector3::z(),
+            1280,
+            720,
+            1.1,
+        )
+        .unwrap();
+        let small = cam.downscaled(2);
+        assert_eq!((small.width, small.height), (640, 360));
+        for p in [Vector3::new(0.1, 0.2, 0.9), Vector3::new(-0.3, 0.5, 0.7)] {
+            let big = cam.project(&p).unwrap();
+            let s = small.project(&p).unwrap();
+            // Output pixel j covers input pixels 2j and 2j + 1, centred at 2j + 0.5.
+            assert!((2.0 * s.x + 0.5 - big.x).abs() < 1e-9);
+            assert!((2.0 * s.y + 0.5 - big.y).abs() < 1e-9);
+        }
     }
 }

@@ -172,10 +172,16 @@ pub fn downscale<'b>(
                 buf.sums.resize(ow * channels, 0);
                 for y in oy * f..oy * f + f {
                     let row = &data[y * w * channels..(y * w + ow * f) * channels];
-                    for (x, px) in row.chunks_exact(channels).enumerate() {
-                        let o = (x / f) * channels;
-                        for (s, &v) in buf.sums[o..o + channels].iter_mut().zip(px) {
-                            *s += u32::from(v);
+                    // One output pixel's `f` input pixels at a time.
+                    for (sums, block) in buf
+                        .sums
+                        .chunks_exact_mut(channels)
+                        .zip(row.chunks_exact(f * channels))
+                    {
+                        for px in block.chunks_exact(channels) {
+                            for (s, &v) in sums.iter_mut().zip(px) {
+                                *s += u32::from(v);
+                            }
                         }
                     }
                 }
@@ -196,9 +202,13 @@ pub fn downscale<'b>(
             buf.floats.clear();
             buf.floats.resize(ow * oh, 0.0);
             for oy in 0..oh {
+                let out = &mut buf.floats[oy * ow..(oy + 1) * ow];
                 for y in oy * f..oy * f + f {
-                    for (x, &v) in data[y * w..y * w + ow * f].iter().enumerate() {
-                        buf.floats[oy * ow + x / f] += v;
+                    for (o, block) in out
+                        .iter_mut()
+                        .zip(data[y * w..y * w + ow * f].chunks_exact(f))
+                    {
+                        *o += block.iter().sum::<f32>();
                     }
                 }
             }

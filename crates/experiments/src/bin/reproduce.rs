@@ -364,8 +364,8 @@ fn write_docs(
          contours, edge maps from the colour gradient, the short-contour penalty, a causal \
          foreground gate dilated by 2 px, frames wider than 640 px shrunk to fit (these videos \
          are 640 px wide), the fingertip floor on the scene's table, a cap of 0.8 on the \
-         models' dwell (last state kept), 90 % of the particles split evenly over the actions, each action's θ prior its training targets, \
-         and the pose reported as the centred 7-frame median (3 frames, 0.1 s, of latency; the \
+         models' dwell (last state kept), 90 % of the particles split evenly over the \
+         actions, each action's θ prior its training targets, and the pose reported as the centred 7-frame median (3 frames, 0.1 s, of latency; the \
          causal row is the live-video figure). Each of these was chosen on the training \
          subjects ADL001–004 and ADL006–007 rendered the same way (the colour gradient on \
          ADL001–007 in randomised scene styles, and with it the gate's dilation and the 640 px \
