@@ -133,6 +133,8 @@ pub struct ObservationConfig {
     /// image; estimates stay in the world, and outputs keep the frame's size. 0 keeps every
     /// frame at its own size.
     pub max_width: u32,
+    /// Where the edge image is computed (not in the paper).
+    pub edge_region: EdgeRegion,
     /// The short-contour penalty, which replaces SPEC's mean error ε̄ (not in the paper).
     pub short_contour_penalty: PenaltyConfig,
     /// The local normalisation of G (not in SPEC §4.1).
@@ -161,6 +163,20 @@ impl From<Contour> for actrack_render::ContourMethod {
             Contour::Analytic => Self::Analytic,
         }
     }
+}
+
+/// Where the edge image G is computed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum EdgeRegion {
+    /// Every pixel of the frame (SPEC §4.1): G is normalised by the maxima of the whole frame.
+    Frame,
+    /// The pixels the arms of the frame's particles project into, with the halo the Sobel
+    /// and Gaussian filters need (not in the paper): the likelihood reads G nowhere else. The
+    /// region follows the particles, so the cost of G, the gate and its normalisation follow
+    /// the arm, not the frame; G is 0 elsewhere, and its maxima are the region's.
+    #[default]
+    Particles,
 }
 
 /// The image gradient the edge map is computed from.
@@ -397,6 +413,7 @@ impl Default for ObservationConfig {
             gamma_sqrt_views: true,
             gradient: Gradient::Colour,
             max_width: 640,
+            edge_region: EdgeRegion::Particles,
             short_contour_penalty: PenaltyConfig::default(),
             local_norm: LocalNormConfig::default(),
             foreground_gate: GateConfig::default(),

@@ -9,7 +9,7 @@
 //! tracked arm's silhouette, so the arm is not learnt as background while the track follows it
 //! (a cup held at the mouth stays foreground).
 
-use actrack_render::{ArmGeometry, Camera, DilateScratch, EdgeImage, ImageView};
+use actrack_render::{ArmGeometry, Camera, DilateScratch, EdgeImage, ImageView, PixelRect};
 
 use crate::config::GateConfig;
 use crate::error::{Error, Result};
@@ -20,10 +20,15 @@ use crate::error::{Error, Result};
 pub struct ForegroundGate {
     background: Vec<f32>,
     chan: Vec<f32>,
-    /// The grey values of the frame `apply` gated last, for `update` of the same frame.
+    /// The grey values of the region `apply` gated last, for `update` of the same frame.
     grey: Vec<f32>,
-    /// Whether `grey` holds the frame that `update` is given next.
-    fresh: bool,
+    /// The region whose grey values `grey` holds, when they are of the frame `update` is
+    /// given next.
+    fresh: Option<PixelRect>,
+    /// One row's grey values.
+    row: Vec<f32>,
+    /// The rows of the next frame's turn outside the gated region (`SWEEP`).
+    sweep: usize,
     foreground: Vec<u8>,
     covered: Vec<u8>,
     dilate: DilateScratch,
@@ -48,27 +53,52 @@ impl ForegroundGate {
         g: &mut EdgeImage,
     ) -> Result<()> {
         let (w, h) = view.size();
+        self.apply_region(cfg, view, PixelRect::full(w, h), view, g)
+    }
+
+    /// [`apply`](Self::apply) to the edge image `g` of the pixels `rect` of `view`; `pixels`
+    /// holds them (`actrack_render::crop`). The mask is found inside `rect` only.
+    ///
+    /// # Errors
+    /// When `view` and the background differ in size, or `rect`, `pixels` and `g` do not fit.
+    pub fn apply_region(
+        &mut self,
+        cfg: &GateConfig,
+        view: ImageView<'_>,
+        rect: PixelRect,
+        pixels: ImageView<'_>,
+        g: &mut EdgeImage,
+    ) -> Result<()> {
+        let (w, h) = view.size();
         if self.background.is_empty() {
             actrack_render::grey_image(view, &mut self.chan, &mut self.background);
         }
-        if self.background.len() != w as usize * h as usize || g.width() != w || g.height() != h {
+        let (rw, rh) = (rect.width(), rect.height());
+        if self.background.len() != w as usize * h as usize
+            || !PixelRect::full(w, h).contains(&rect)
+            || pixels.size() != (rw, rh)
+            || (g.width(), g.height()) != (rw, rh)
+        {
             return Err(Error::Config(format!(
                 "foreground gate: a {w}×{h} frame against a background of {} pixels",
                 self.background.len()
             )));
         }
-        actrack_render::grey_image(view, &mut self.chan, &mut self.grey);
-        self.fresh = true;
+        actrack_render::grey_image(pixels, &mut self.chan, &mut self.grey);
+        self.fresh = Some(rect);
         self.foreground.clear();
-        self.foreground.extend(
-            self.grey
-                .iter()
-                .zip(&self.background)
-                .map(|(&i, &b)| u8::from((i - b).abs() > cfg.threshold)),
-        );
+        let (x0, x1) = (rect.x0 as usize, rect.x1 as usize);
+        for (y, grey) in (rect.y0 as usize..).zip(self.grey.chunks_exact(rw as usize)) {
+            let back = &self.background[y * w as usize + x0..y * w as usize + x1];
+            self.foreground.extend(
+                grey.iter()
+                    .zip(back)
+                    .map(|(&i, &b)| u8::from((i - b).abs() > cfg.threshold)),
+            );
+        }
         actrack_render::dilate_mask(
             &self.foreground,
-            (w as usize, h as usize),
+            (rw as usize, rh as usize),
             cfg.radius as usize,
             &mut self.dilate,
             &mut self.mask,
@@ -80,7 +110,7 @@ impl ForegroundGate {
         for (d, &m) in data.iter_mut().zip(&self.mask) {
             *d *= if m != 0 { on } else { off };
         }
-        *g = EdgeImage::from_vec(w, h, data)
+        *g = EdgeImage::from_vec(rw, rh, data)
             .map_err(|e| Error::Config(format!("foreground gate: {e}")))?;
         Ok(())
     }
@@ -100,21 +130,49 @@ impl ForegroundGate {
         tracked: &[&[f64; 9]],
     ) -> Result<()> {
         let (w, h) = view.size();
+        self.update_region(cfg, view, PixelRect::full(w, h), camera, geometry, tracked)
+    }
+
+    /// [`update`](Self::update) where the gate was applied to the pixels `rect` of `view`
+    /// ([`apply_region`](Self::apply_region)): those pixels are blended every frame (their grey
+    /// values reused), the others, which the gate did not read, one row in [`SWEEP`] per frame
+    /// in turn at the rate that compounds to `SWEEP` frames, 1 − (1 − rate)^SWEEP. A static
+    /// background is learnt as fast as by blending every pixel every frame.
+    ///
+    /// # Errors
+    /// When `view` and the background differ in size or `rect` does not lie in the frame.
+    pub fn update_region(
+        &mut self,
+        cfg: &GateConfig,
+        view: ImageView<'_>,
+        rect: PixelRect,
+        camera: &Camera,
+        geometry: &ArmGeometry,
+        tracked: &[&[f64; 9]],
+    ) -> Result<()> {
+        let (w, h) = view.size();
         if self.background.is_empty() {
             actrack_render::grey_image(view, &mut self.chan, &mut self.background);
         }
-        // The grey frame of `apply` when this is the frame it gated.
-        if !std::mem::take(&mut self.fresh) || self.grey.len() != w as usize * h as usize {
-            actrack_render::grey_image(view, &mut self.chan, &mut self.grey);
-        }
-        if self.grey.len() != self.background.len() {
+        let n = w as usize * h as usize;
+        if self.background.len() != n || !PixelRect::full(w, h).contains(&rect) {
             return Err(Error::Config(format!(
                 "foreground gate: a {w}×{h} frame against a background of {} pixels",
                 self.background.len()
             )));
         }
+        // The grey values of `rect` from `apply` when this is the frame and region it gated.
+        let (rw, rh) = (rect.width() as usize, rect.height() as usize);
+        if self.fresh.take() != Some(rect) || self.grey.len() != rw * rh {
+            self.grey.clear();
+            for y in rect.y0..rect.y1 {
+                let row = row_view(view, y, rect.x0, rect.x1)?;
+                actrack_render::grey_image(row, &mut self.chan, &mut self.row);
+                self.grey.extend_from_slice(&self.row);
+            }
+        }
         self.covered.clear();
-        self.covered.resize(self.grey.len(), 0);
+        self.covered.resize(n, 0);
         for pose in tracked {
             if !pose.iter().all(|x| x.is_finite()) {
                 continue;
@@ -123,17 +181,78 @@ impl ForegroundGate {
             actrack_render::cover_parts(&parts, f64::from(cfg.margin), w, h, &mut self.covered)
                 .map_err(|e| Error::Config(format!("foreground gate: {e}")))?;
         }
-        blend(&mut self.background, &self.grey, &self.covered, cfg.rate);
+        let w = w as usize;
+        let (x0, x1) = (rect.x0 as usize, rect.x1 as usize);
+        if rw > 0 {
+            for (y, grey) in (rect.y0 as usize..).zip(self.grey.chunks_exact(rw)) {
+                let at = y * w + x0..y * w + x1;
+                blend(
+                    &mut self.background[at.clone()],
+                    grey,
+                    &self.covered[at],
+                    cfg.rate,
+                );
+            }
+        }
+        if rect == PixelRect::full(w as u32, h) {
+            return Ok(());
+        }
+        // The rows of this frame's turn, outside `rect`.
+        let rate = 1.0 - (1.0 - cfg.rate).powi(SWEEP as i32);
+        let phase = self.sweep;
+        self.sweep = (self.sweep + 1) % SWEEP;
+        for y in (phase..h as usize).step_by(SWEEP) {
+            let inside = (rect.y0 as usize..rect.y1 as usize).contains(&y) && rw > 0;
+            let spans = if inside {
+                [(0, x0), (x1, w)]
+            } else {
+                [(0, w), (w, w)]
+            };
+            for (a, b) in spans {
+                if a == b {
+                    continue;
+                }
+                #[allow(clippy::cast_possible_truncation)] // both are at most the width
+                let row = row_view(view, y as u32, a as u32, b as u32)?;
+                actrack_render::grey_image(row, &mut self.chan, &mut self.row);
+                let at = y * w + a..y * w + b;
+                blend(
+                    &mut self.background[at.clone()],
+                    &self.row,
+                    &self.covered[at],
+                    rate,
+                );
+            }
+        }
         Ok(())
     }
 }
 
-/// B ← B + rate · (I − B) where `covered` is 0 (equal sizes).
+/// Rows outside the gated region are blended into the background once every `SWEEP` frames.
+pub const SWEEP: usize = 4;
+
+/// The pixels `x0 .. x1` of row `y` of `view` as an image of one row.
+fn row_view(view: ImageView<'_>, y: u32, x0: u32, x1: u32) -> Result<ImageView<'_>> {
+    let w = view.size().0 as usize;
+    let (y, x0, x1) = (y as usize, x0 as usize, x1 as usize);
+    let width = u32::try_from(x1 - x0).unwrap_or(u32::MAX);
+    match view {
+        ImageView::Rgb8 { data, .. } => {
+            ImageView::rgb8(&data[3 * (y * w + x0)..3 * (y * w + x1)], width, 1)
+        }
+        ImageView::Grey8 { data, .. } => ImageView::grey8(&data[y * w + x0..y * w + x1], width, 1),
+        ImageView::GreyF32 { data, .. } => {
+            ImageView::grey_f32(&data[y * w + x0..y * w + x1], width, 1)
+        }
+    }
+    .map_err(|e| Error::Config(format!("foreground gate: {e}")))
+}
+
+/// B ← B + rate · (I − B) where `covered` is 0 (equal sizes). Without a branch, so that it
+/// vectorises: a covered pixel adds 0·rate·(I − B) = 0.
 pub fn blend(background: &mut [f32], grey: &[f32], covered: &[u8], rate: f32) {
     for ((b, &g), &c) in background.iter_mut().zip(grey).zip(covered) {
-        if c == 0 {
-            *b += rate * (g - *b);
-        }
+        *b += rate * (g - *b) * f32::from(u8::from(c == 0));
     }
 }
 

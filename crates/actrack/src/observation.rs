@@ -143,6 +143,29 @@ impl ObservationModel for SceneObservation<'_> {
     }
 }
 
+/// The arm-length correction alone (SPEC §3.4), for [`actrack_pf::Tracker::predict`], which
+/// generates poses without scoring them; it scores nothing (every pose −∞).
+pub struct Correction<'a> {
+    geometry: &'a ArmGeometry,
+}
+
+impl<'a> Correction<'a> {
+    /// The correction with `geometry`'s arm lengths.
+    pub fn new(geometry: &'a ArmGeometry) -> Self {
+        Self { geometry }
+    }
+}
+
+impl ObservationModel for Correction<'_> {
+    fn correct(&self, pose: &mut [f64; 9]) {
+        correct_arm(self.geometry, pose, None);
+    }
+
+    fn log_likelihoods(&self, _poses: &[[f64; 9]], out: &mut [f64]) {
+        out.fill(f64::NEG_INFINITY);
+    }
+}
+
 /// The short-contour penalty (not SPEC §4.3): SPEC's ε̄ is a mean over the contour's points, so
 /// a pose whose contour is short (a forearm foreshortened towards the camera, a hand at the mouth
 /// seen end-on) can lie on a few strong edges of the torso or head and beat the true pose, whose
@@ -320,6 +343,14 @@ impl<O> Timed<O> {
             ll_start: AtomicU64::new(0),
             ll_end: AtomicU64::new(0),
         }
+    }
+
+    /// The stages of a [`actrack_pf::Tracker::predict`] that ended now, milliseconds: resample,
+    /// propagate + sample (split at the first arm correction).
+    pub fn predict_stages(&self) -> [f64; 2] {
+        let end = since(self.base);
+        let fc = self.first_correct.load(Ordering::Relaxed).min(end);
+        [fc as f64 * 1e-6, end.saturating_sub(fc) as f64 * 1e-6]
     }
 
     /// The stages of a step that ended now, milliseconds: resample, propagate + sample,

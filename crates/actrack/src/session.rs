@@ -19,18 +19,21 @@ use actrack_pf::{
     ActionBalance, CentredMedian, Estimate, ObservationModel, TableRegion, Tracker, TrackerConfig,
 };
 use actrack_render::{
-    ArmGeometry as RenderArm, Camera as RenderCamera, DownscaleBuf, EdgeImage, EdgeWorkspace,
-    ImageView, LikelihoodModel, LocalNorm, LocalNormScratch,
+    ArmGeometry as RenderArm, Camera as RenderCamera, CropBuf, DownscaleBuf, EdgeImage,
+    EdgeWorkspace, ImageView, LikelihoodModel, LocalNorm, LocalNormScratch, PixelRect,
 };
 use image::RgbImage;
 use nalgebra::Vector3;
 
-use crate::config::{FloorSetting, Gradient, Median, OutputConfig, ThetaPrior, TrackConfig};
+use crate::config::{
+    EdgeRegion, FloorSetting, Gradient, Median, ObservationConfig, OutputConfig, ThetaPrior,
+    TrackConfig,
+};
 use crate::error::{Error, Result};
 use crate::gate::ForegroundGate;
 use crate::model::ActionModel;
 use crate::observation::{
-    FingertipFloor, Floor, SceneObservation, Scorer, ShortContourPenalty, Timed,
+    Correction, FingertipFloor, Floor, SceneObservation, Scorer, ShortContourPenalty, Timed,
 };
 use crate::scene::{Scene, render_arm};
 
@@ -76,9 +79,17 @@ struct ViewStage {
     /// The integer factor the view's frames are shrunk by (1: full size).
     factor: u32,
     shrink: DownscaleBuf,
+    /// The pixels of the edge region (`observation.edge_region = "particles"`).
+    crop: CropBuf,
+    /// The rectangle of the last edge image that may hold non-zero pixels.
+    kept: Option<PixelRect>,
+    /// The pixels the gate was applied to this frame (`None`: the whole frame).
+    gated: Option<PixelRect>,
     ws: EdgeWorkspace,
     local: LocalNormScratch,
     spec: EdgeImage,
+    /// The edge image of the region before it is pasted into the frame's.
+    part: EdgeImage,
     gate: ForegroundGate,
 }
 
@@ -193,7 +204,8 @@ impl Session {
         for (c, &f) in scene.cameras.iter().zip(&factors) {
             if c.model.height / f == 0 {
                 return Err(Error::Config(format!(
-                    "observation.max_width = {}: camera `{}` ({}×{}) would be shrunk by {f} to                      nothing; raise max_width or set it to 0",
+                    "observation.max_width = {}: camera `{}` ({}×{}) would be shrunk by {f} to nothing; \
+                     raise max_width or set it to 0",
                     config.observation.max_width, c.name, c.model.width, c.model.height
                 )));
             }
@@ -301,6 +313,14 @@ impl Session {
         &self.edges
     }
 
+    /// The rectangle of view `view`'s edge image (pixels of the image the observation works
+    /// on, see `observation.max_width`) that the last step computed; the rest of the image
+    /// is 0. `None` when the whole frame was computed (`observation.edge_region = "frame"`,
+    /// or before the first step).
+    pub fn edge_region(&self, view: usize) -> Option<PixelRect> {
+        self.views.get(view).and_then(|v| v.kept)
+    }
+
     /// One step on RGB images, one per camera of the scene.
     ///
     /// # Errors
@@ -331,9 +351,7 @@ impl Session {
                 self.cameras.len()
             )));
         }
-        let obs_cfg = &self.config.observation;
-        for (v, img) in images.iter().enumerate() {
-            let cam = &self.scene.cameras[v];
+        for (img, cam) in images.iter().zip(&self.scene.cameras) {
             if img.size() != (cam.model.width, cam.model.height) {
                 return Err(Error::Config(format!(
                     "frame {frame}: the image is {}×{} but camera `{}` of the scene is {}×{}",
@@ -344,83 +362,110 @@ impl Session {
                     cam.model.height
                 )));
             }
-            let err = |e: actrack_render::RenderError| Error::Config(format!("frame {frame}: {e}"));
+        }
+        // Resample, propagate and generate: the poses the likelihood will score.
+        let predict = Timed::new(Correction::new(&self.geometry));
+        self.tracker.predict(&predict);
+        let [resample, propagate] = predict.predict_stages();
+        let t1 = Instant::now();
+        let err = |e: actrack_render::RenderError| Error::Config(format!("frame {frame}: {e}"));
+        let regions = self.edge_regions();
+        for (v, img) in images.iter().enumerate() {
+            let stage = &mut self.views[v];
+            if stage.factor > 1 {
+                actrack_render::downscale(*img, stage.factor, &mut stage.shrink).map_err(err)?;
+            }
+        }
+        for (v, img) in images.iter().enumerate() {
+            let cam = &self.scene.cameras[v];
             let stage = &mut self.views[v];
             let full = self.scene.edge_params(cam.model.width);
             let params = actrack_render::EdgeParams {
-                colour: obs_cfg.gradient == Gradient::Colour,
+                colour: self.config.observation.gradient == Gradient::Colour,
                 sigma: full.sigma / stage.factor as f32,
                 ..full
             };
-            let img = &if stage.factor > 1 {
-                actrack_render::downscale(*img, stage.factor, &mut stage.shrink).map_err(err)?
-            } else {
-                *img
-            };
-            if obs_cfg.local_norm.enabled {
-                stage
-                    .ws
-                    .compute_into(*img, &params, &mut stage.spec)
-                    .map_err(err)?;
-                let ln = LocalNorm {
-                    radius: obs_cfg.local_norm.radius,
-                    floor: obs_cfg.local_norm.floor,
-                };
-                actrack_render::local_normalise(
-                    &stage.spec,
-                    &ln,
-                    &mut stage.local,
-                    &mut self.edges[v],
-                )
-                .map_err(err)?;
-            } else {
-                stage
-                    .ws
-                    .compute_into(*img, &params, &mut self.edges[v])
-                    .map_err(err)?;
-            }
-            if obs_cfg.foreground_gate.enabled {
-                stage
-                    .gate
-                    .apply(&obs_cfg.foreground_gate, *img, &mut self.edges[v])
-                    .map_err(|e| Error::Config(format!("frame {frame}: {e}")))?;
-            }
+            view_edges(
+                stage,
+                &mut self.edges[v],
+                &self.config.observation,
+                &params,
+                *img,
+                regions[v],
+            )
+            .map_err(|e| match e {
+                Error::Config(m) => Error::Config(format!("frame {frame}: {m}")),
+                e => e,
+            })?;
         }
-        let edges_ms = t0.elapsed().as_secs_f64() * 1e3;
-        let (estimate, stages) = self.filter();
+        let edges_ms = t1.elapsed().as_secs_f64() * 1e3;
+        let (estimate, [_, _, likelihood, estimates]) = self.filter();
         let r = FrameResult {
             best_world: self.scene.pose_to_world(&estimate.best_pose),
             smoothed_world: self.scene.pose_to_world(&estimate.smoothed_pose),
             theta_world: self.scene.theta_to_world(estimate.theta_mean),
             estimate,
         };
-        let t1 = Instant::now();
+        let t2 = Instant::now();
         let gate = &self.config.observation.foreground_gate;
         if gate.enabled {
             let tracked = [&r.best_world, &r.smoothed_world];
             for ((img, cam), stage) in images.iter().zip(&self.cameras).zip(&mut self.views) {
                 // The shrunk frame the edge stage made, if the view is shrunk.
                 let img = stage.shrink.last().unwrap_or(*img);
+                let (w, h) = img.size();
                 stage
                     .gate
-                    .update(gate, img, cam, &self.geometry, &tracked)
+                    .update_region(
+                        gate,
+                        img,
+                        stage.gated.unwrap_or(PixelRect::full(w, h)),
+                        cam,
+                        &self.geometry,
+                        &tracked,
+                    )
                     .map_err(|e| Error::Config(format!("frame {frame}: {e}")))?;
             }
         }
-        let background = t1.elapsed().as_secs_f64() * 1e3;
+        let background = t2.elapsed().as_secs_f64() * 1e3;
         self.times = StageTimes {
             edges: edges_ms,
-            resample: stages[0],
-            propagate: stages[1],
-            likelihood: stages[2],
-            estimates: stages[3],
+            resample,
+            propagate,
+            likelihood,
+            estimates,
             background,
             total: t0.elapsed().as_secs_f64() * 1e3,
         };
         Ok(r)
     }
 
-    /// One filter step on the current edge images with the configured observation model.
+    /// The rectangle of every view whose edges the likelihood can read this frame: with
+    /// `observation.edge_region = "particles"` the pixels the arms of the predicted poses
+    /// project into (2 px for bilinear reads and rounding), else `None` (the whole frame).
+    fn edge_regions(&self) -> Vec<Option<PixelRect>> {
+        if self.config.observation.edge_region == EdgeRegion::Frame {
+            return vec![None; self.cameras.len()];
+        }
+        let mut world = match self.world.lock() {
+            Ok(w) => w,
+            Err(p) => p.into_inner(),
+        };
+        world.clear();
+        world.extend(
+            self.tracker
+                .samples()
+                .iter()
+                .map(|p| self.scene.pose_to_world(p)),
+        );
+        self.cameras
+            .iter()
+            .map(|cam| Some(actrack_render::arm_bounds(cam, &self.geometry, &world, 2.0)))
+            .collect()
+    }
+
+    /// The update of the filter step (the poses of [`Tracker::predict`] scored on the current
+    /// edge images with the configured observation model) and its stage times.
     fn filter(&mut self) -> (Estimate, [f64; 4]) {
         let pen = &self.config.observation.short_contour_penalty;
         #[allow(clippy::single_match_else)] // the GPU variant exists with feature `gpu`
@@ -449,6 +494,89 @@ impl Session {
     }
 }
 
+/// The edge image `out` of one view from its frame `img` (shrunk by the stage first, if it
+/// shrinks): the whole frame, or `keep` and the halo its filters need, pasted into a frame-sized
+/// image that is 0 elsewhere.
+fn view_edges(
+    stage: &mut ViewStage,
+    out: &mut EdgeImage,
+    obs_cfg: &ObservationConfig,
+    params: &actrack_render::EdgeParams,
+    img: ImageView<'_>,
+    keep: Option<PixelRect>,
+) -> Result<()> {
+    let err = |e: actrack_render::RenderError| Error::Config(e.to_string());
+    let ViewStage {
+        shrink,
+        crop,
+        kept,
+        gated,
+        ws,
+        local,
+        spec,
+        part,
+        gate,
+        ..
+    } = stage;
+    let img = shrink.last().unwrap_or(img);
+    let (w, h) = img.size();
+    // The pixels the filters read for `keep`: Sobel's 1, the Gaussian's ⌈3σ⌉, the local
+    // window and the gate's dilation.
+    let region = keep.map(|k| {
+        let mut halo = 1 + (3.0 * params.sigma).ceil().max(1.0) as u32;
+        if obs_cfg.local_norm.enabled {
+            halo += obs_cfg.local_norm.radius;
+        }
+        if obs_cfg.foreground_gate.enabled {
+            halo += obs_cfg.foreground_gate.radius;
+        }
+        (k, k.grown(halo, w, h))
+    });
+    let clear = kept.unwrap_or(PixelRect::full(w, h));
+    let (pixels, target) = match region {
+        Some((k, _)) if k.is_empty() => {
+            // No pose to score: nothing to compute.
+            actrack_render::paste(
+                &EdgeImage::default(),
+                PixelRect::default(),
+                k,
+                clear,
+                (w, h),
+                out,
+            )
+            .map_err(err)?;
+            *kept = Some(k);
+            *gated = Some(k);
+            return Ok(());
+        }
+        Some((_, r)) => (actrack_render::crop(img, r, crop).map_err(err)?, &mut *part),
+        None => (img, &mut *out),
+    };
+    if obs_cfg.local_norm.enabled {
+        ws.compute_into(pixels, params, spec).map_err(err)?;
+        let ln = LocalNorm {
+            radius: obs_cfg.local_norm.radius,
+            floor: obs_cfg.local_norm.floor,
+        };
+        actrack_render::local_normalise(spec, &ln, local, target).map_err(err)?;
+    } else {
+        ws.compute_into(pixels, params, target).map_err(err)?;
+    }
+    *gated = region.map(|(_, r)| r);
+    if obs_cfg.foreground_gate.enabled {
+        let rect = region.map_or(PixelRect::full(w, h), |(_, r)| r);
+        gate.apply_region(&obs_cfg.foreground_gate, img, rect, pixels, target)?;
+    }
+    *kept = match region {
+        Some((k, r)) => {
+            actrack_render::paste(part, r, k, clear, (w, h), out).map_err(err)?;
+            Some(k)
+        }
+        None => None,
+    };
+    Ok(())
+}
+
 /// The integer factor that brings a frame `width` pixels wide within `max_width` (0: no limit).
 pub fn shrink_factor(width: u32, max_width: u32) -> u32 {
     if max_width == 0 || width <= max_width {
@@ -458,7 +586,7 @@ pub fn shrink_factor(width: u32, max_width: u32) -> u32 {
     }
 }
 
-/// One filter step on `obs` (under the floor, if any) with its stage times.
+/// The update of a filter step on `obs` (under the floor, if any) with its stage times.
 fn timed_step<O: ObservationModel>(
     tracker: &mut Tracker,
     obs: O,
@@ -468,12 +596,12 @@ fn timed_step<O: ObservationModel>(
     match floor {
         Some(f) => {
             let t = Timed::new(FingertipFloor::new(obs, f));
-            let e = tracker.step(&t);
+            let e = tracker.update(&t);
             (e, t.stages())
         }
         None => {
             let t = Timed::new(obs);
-            let e = tracker.step(&t);
+            let e = tracker.update(&t);
             (e, t.stages())
         }
     }

@@ -75,6 +75,7 @@ fn every_key_of_the_method_changes_the_track_and_stays_finite() {
         "observation.contour=\"raster\"",
         "prior.height_scale=0.9",
         "observation.max_width=80",
+        "observation.edge_region=\"frame\"",
     ] {
         let other = run(&s, &config(&[kv]));
         assert_ne!(best(&other), best(&base), "{kv} changed nothing");
@@ -98,6 +99,54 @@ fn every_key_of_the_method_changes_the_track_and_stays_finite() {
     let mut paper = TrackConfig::preset("paper").unwrap();
     paper.filter.particles = 120;
     assert_eq!(run(&s, &paper).len(), s.frames.len());
+}
+
+#[test]
+fn every_scored_contour_lies_in_the_computed_edge_region() {
+    let s = small();
+    for contour in ["analytic", "raster"] {
+        let cfg = config(&[&format!("observation.contour=\"{contour}\"")]);
+        let method = match contour {
+            "raster" => actrack::render::ContourMethod::Raster,
+            _ => actrack::render::ContourMethod::Analytic,
+        };
+        let mut session = Session::new(&s.model, &s.scene, &cfg).unwrap();
+        let cam = &s.scene.cameras[0].model;
+        let mut smaller = 0;
+        for (i, f) in s.frames.iter().enumerate() {
+            session.step_rgb(i, &[f]).unwrap();
+            let rect = session.edge_region(0).unwrap();
+            smaller += usize::from(rect.area() < u64::from(cam.width * cam.height));
+            let edges = &session.edges()[0];
+            for (k, &g) in edges.data().iter().enumerate() {
+                let (u, v) = ((k % 160) as u32, (k / 160) as u32);
+                let inside = (rect.x0..rect.x1).contains(&u) && (rect.y0..rect.y1).contains(&v);
+                assert!(
+                    inside || g == 0.0,
+                    "frame {i}: G = {g} at ({u}, {v}) outside {rect:?}"
+                );
+            }
+            for pose in session.tracker().samples() {
+                let world = s.scene.pose_to_world(pose);
+                for [u, v] in
+                    actrack::render::contour_points(cam, session.geometry(), &world, method)
+                {
+                    // Bilinear reads touch the next pixel too; points beyond the image's
+                    // border are not read.
+                    let lo = |p: f64, lo: u32| lo == 0 || p.floor() >= f64::from(lo);
+                    let hi = |p: f64, hi: u32, n: u32| hi == n || p.floor() + 1.0 < f64::from(hi);
+                    assert!(
+                        lo(u, rect.x0)
+                            && lo(v, rect.y0)
+                            && hi(u, rect.x1, 160)
+                            && hi(v, rect.y1, 120),
+                        "frame {i}: contour point ({u}, {v}) outside {rect:?}"
+                    );
+                }
+            }
+        }
+        assert!(smaller > 0, "the region never left out any pixel");
+    }
 }
 
 #[test]

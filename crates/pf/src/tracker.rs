@@ -273,6 +273,9 @@ pub struct Tracker {
     mixture: MixtureScratch,
     scratch: Scratch,
     median: MedianFilter,
+    /// Whether `samples` holds the poses of the frame being processed ([`Tracker::predict`]
+    /// ran, [`Tracker::update`] not yet).
+    predicted: bool,
 }
 
 impl Tracker {
@@ -371,6 +374,7 @@ impl Tracker {
             mixture: MixtureScratch::default(),
             scratch: Scratch::new(n_actions),
             median: MedianFilter::new(config.median_window),
+            predicted: false,
             models,
             config,
         })
@@ -379,6 +383,7 @@ impl Tracker {
     /// Forget everything: the next [`Tracker::step`] is frame 0 again (same seed, same draws).
     pub fn reset(&mut self) {
         self.frame = 0;
+        self.predicted = false;
         self.median.reset();
         let m = self.config.particles;
         self.log_w.fill(-(m as f64).ln());
@@ -394,6 +399,19 @@ impl Tracker {
     /// If no particle gets a usable log-likelihood (all −∞/NaN), the prior weights are kept,
     /// the estimate is flagged [`Estimate::degenerate`] and filtering carries on.
     pub fn step<O: ObservationModel + ?Sized>(&mut self, obs: &O) -> Estimate {
+        self.predict(obs);
+        self.update(obs)
+    }
+
+    /// The first half of [`Tracker::step`]: resample, propagate and generate the poses of the
+    /// frame (corrected by `obs`), without scoring them. [`Tracker::samples`] then holds every
+    /// pose that [`Tracker::update`] will score, so that a caller can prepare its observation for
+    /// exactly those poses (the region of the image they project into). Calling it again before
+    /// `update` changes nothing.
+    pub fn predict<O: ObservationModel + ?Sized>(&mut self, obs: &O) {
+        if self.predicted {
+            return;
+        }
         let m = self.config.particles;
         let s = self.config.samples_per_particle();
         let seed = self.config.seed;
@@ -438,6 +456,17 @@ impl Tracker {
                 .with_min_len(MIN_PARTICLES_PER_TASK)
                 .for_each(particle);
         }
+        self.predicted = true;
+    }
+
+    /// The second half of [`Tracker::step`]: scores the poses of [`Tracker::predict`] with `obs`,
+    /// weights the particles and returns the frame's estimate (predicting first if `predict`
+    /// was not called for this frame).
+    pub fn update<O: ObservationModel + ?Sized>(&mut self, obs: &O) -> Estimate {
+        self.predict(obs);
+        self.predicted = false;
+        let m = self.config.particles;
+        let s = self.config.samples_per_particle();
 
         // §3.5 weighting.
         obs.log_likelihoods(&self.samples, &mut self.sample_ll);
@@ -657,6 +686,12 @@ impl Tracker {
     /// The particles' log-likelihoods ℓ_i of the last step (NaN/+∞ reported as −∞).
     pub fn log_likelihoods(&self) -> &[f64] {
         &self.ll
+    }
+    /// Every generated pose of the frame (S per particle, particle-major; actor frame): after
+    /// [`Tracker::predict`] the poses `update` will score, after a step the scored ones with
+    /// each particle's x̃ first in its block.
+    pub fn samples(&self) -> &[[f64; D]] {
+        &self.samples
     }
     /// The corrected pose x̃ of particle `i` (p, q, r; metres, actor frame) after the last step
     /// (its best-scoring sample when S > 1).

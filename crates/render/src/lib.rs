@@ -63,6 +63,7 @@ pub mod gpu;
 mod image;
 mod likelihood;
 mod local_norm;
+mod roi;
 mod silhouette;
 pub mod synth;
 
@@ -80,6 +81,7 @@ pub use likelihood::{LikelihoodModel, SamplingMode};
 pub use local_norm::{
     DilateScratch, LocalNorm, LocalNormScratch, dilate_mask, local_normalise, max_filter,
 };
+pub use roi::{CropBuf, PixelRect, arm_bounds, crop, paste};
 pub use silhouette::{ForegroundCounts, MAX_SILHOUETTE_PARTS, Overlap};
 
 /// An arm pose as it crosses crate boundaries: (p shoulder xyz, q elbow xyz, r fingertip xyz),

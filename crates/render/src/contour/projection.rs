@@ -304,12 +304,18 @@ pub fn cover_parts(
         if u1 < 0.0 || v1 < 0.0 {
             continue;
         }
+        // A part grown by `grow` is convex, so it covers one run of every row: found from
+        // both ends, then filled.
+        let inside =
+            |u: usize, v: usize| p.signed_distance(Vector2::new(u as f64, v as f64)) <= grow;
+        let u0 = lo(b[0]);
         for v in lo(b[1])..=v1 as usize {
-            for u in lo(b[0])..=u1 as usize {
-                if p.signed_distance(Vector2::new(u as f64, v as f64)) <= grow {
-                    mask[v * w + u] = 1;
-                }
-            }
+            let row = &mut mask[v * w..(v + 1) * w];
+            let Some(a) = (u0..=u1 as usize).find(|&u| inside(u, v)) else {
+                continue;
+            };
+            let z = (a..=u1 as usize).rev().find(|&u| inside(u, v)).unwrap_or(a);
+            row[a..=z].fill(1);
         }
     }
     Ok(())

@@ -502,3 +502,20 @@ fn sampling() {
     assert_eq!(g.get(2, 0), Some(1.0));
     assert_eq!(g.get(3, 0), None);
 }
+
+#[test]
+fn grey_image_equals_the_rows_of_the_edge_stage() {
+    // Every byte value in every channel, on an odd width.
+    let (w, h) = (37usize, 23usize);
+    let rgb: Vec<u8> = (0..3 * w * h)
+        .map(|i| ((i * 97 + i / 5) % 256) as u8)
+        .collect();
+    let view = ImageView::rgb8(&rgb, w as u32, h as u32).unwrap();
+    let (mut chan, mut got) = (Vec::new(), Vec::new());
+    grey_image(view, &mut chan, &mut got);
+    let mut row = vec![0.0; w];
+    for y in 0..h {
+        grey_row(&view, y, &mut chan, &mut row);
+        assert_eq!(&got[y * w..(y + 1) * w], &row[..], "row {y}");
+    }
+}
