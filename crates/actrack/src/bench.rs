@@ -111,6 +111,9 @@ pub struct BenchReport {
     pub fps: f64,
     /// Per-stage medians, ms.
     pub stages_ms: StageMedians,
+    /// The median share of a view's pixels whose edges a frame computed
+    /// (`observation.edge_region`; 1 for the whole frame).
+    pub edge_region_share: f64,
     /// Peak resident memory of the process (`VmHWM`), KiB; `None` off Linux.
     pub peak_rss_kib: Option<u64>,
     /// Resident memory after the warm-up and at the end, KiB (memory must not grow with frames).
@@ -268,6 +271,7 @@ pub fn run_bench(opts: &BenchOptions) -> Result<BenchReport> {
     let setup_seconds = setup.elapsed().as_secs_f64();
     let mut per_frame = Vec::with_capacity(opts.frames);
     let mut st: [Vec<f64>; 6] = Default::default();
+    let mut shares = Vec::with_capacity(opts.frames * opts.views);
     let mut rss_after_warmup = None;
     pool.install(|| -> Result<()> {
         for (t, views) in prep.frames.iter().enumerate() {
@@ -296,6 +300,14 @@ pub fn run_bench(opts: &BenchOptions) -> Result<BenchReport> {
                 ];
                 for (s, v) in st.iter_mut().zip(stages) {
                     s.push(v);
+                }
+                for (v, g) in session.edges().iter().enumerate() {
+                    let all = f64::from(g.width()) * f64::from(g.height());
+                    shares.push(
+                        session
+                            .edge_region(v)
+                            .map_or(1.0, |r| r.area() as f64 / all.max(1.0)),
+                    );
                 }
             }
         }
@@ -331,6 +343,7 @@ pub fn run_bench(opts: &BenchOptions) -> Result<BenchReport> {
             estimates: median(&st[4]),
             background: median(&st[5]),
         },
+        edge_region_share: median(&shares),
         peak_rss_kib: hwm,
         rss_kib_after_warmup: rss_after_warmup,
         rss_kib_end: rss_end,

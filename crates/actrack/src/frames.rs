@@ -731,40 +731,106 @@ impl Y4mReader {
         let (ysz, cw, ch) = self.plane_sizes();
         let (yp, rest) = self.buf.split_at(ysz);
         let (up, vp) = rest.split_at(cw * ch);
-        let mut img = RgbImage::new(w as u32, h as u32);
-        for (i, px) in img.pixels_mut().enumerate() {
-            let (x, y) = (i % w, i / w);
-            let yy = f64::from(yp[i]);
-            let (u, v) = match self.chroma {
-                Chroma::Mono => (128.0, 128.0),
-                Chroma::C444 => (f64::from(up[i]), f64::from(vp[i])),
-                Chroma::C422 => (f64::from(up[y * cw + x / 2]), f64::from(vp[y * cw + x / 2])),
-                Chroma::C420 => (
-                    f64::from(up[(y / 2) * cw + x / 2]),
-                    f64::from(vp[(y / 2) * cw + x / 2]),
-                ),
+        let t = YuvTables::new(self.full_range);
+        let mut data = vec![0u8; 3 * w * h];
+        for (y, (out, yrow)) in data
+            .chunks_exact_mut(3 * w)
+            .zip(yp.chunks_exact(w))
+            .enumerate()
+        {
+            let crow = match self.chroma {
+                Chroma::Mono => 0,
+                Chroma::C444 | Chroma::C422 => y,
+                Chroma::C420 => y / 2,
             };
-            let (yy, cb, cr) = if self.full_range {
-                (yy, u - 128.0, v - 128.0)
+            let (urow, vrow) = if self.chroma == Chroma::Mono {
+                (&[][..], &[][..])
             } else {
                 (
-                    (yy - 16.0) * 255.0 / 219.0,
-                    (u - 128.0) * 255.0 / 224.0,
-                    (v - 128.0) * 255.0 / 224.0,
+                    &up[crow * cw..(crow + 1) * cw],
+                    &vp[crow * cw..(crow + 1) * cw],
                 )
             };
-            let r = yy + 1.402 * cr;
-            let g = yy - 0.344_136 * cb - 0.714_136 * cr;
-            let b = yy + 1.772 * cb;
-            let c = |x: f64| x.round().clamp(0.0, 255.0) as u8;
-            px.0 = if self.chroma == Chroma::Mono {
-                [c(yy); 3]
-            } else {
-                [c(r), c(g), c(b)]
-            };
+            for (x, (px, &yv)) in out.chunks_exact_mut(3).zip(yrow).enumerate() {
+                let yy = t.luma[usize::from(yv)];
+                if self.chroma == Chroma::Mono {
+                    px.fill(round_byte(yy));
+                    continue;
+                }
+                let cx = if self.chroma == Chroma::C444 {
+                    x
+                } else {
+                    x / 2
+                };
+                let (u, v) = (usize::from(urow[cx]), usize::from(vrow[cx]));
+                px[0] = round_byte(yy + t.r_cr[v]);
+                px[1] = round_byte(yy - t.g_cb[u] - t.g_cr[v]);
+                px[2] = round_byte(yy + t.b_cb[u]);
+            }
         }
-        img
+        // The buffer holds exactly w·h pixels.
+        RgbImage::from_raw(w as u32, h as u32, data).unwrap_or_default()
     }
+}
+
+/// The terms of the YCbCr → RGB conversion (BT.601, full or limited range) for every byte
+/// value, each computed as the per-pixel formula computes it:
+/// R = Y′ + 1.402·Cr, G = Y′ − 0.344136·Cb − 0.714136·Cr, B = Y′ + 1.772·Cb with Y′, Cb, Cr
+/// the byte values rescaled (limited range: (Y − 16)·255/219, (C − 128)·255/224).
+struct YuvTables {
+    luma: [f64; 256],
+    r_cr: [f64; 256],
+    g_cb: [f64; 256],
+    g_cr: [f64; 256],
+    b_cb: [f64; 256],
+}
+
+impl YuvTables {
+    fn new(full_range: bool) -> Self {
+        let mut t = Self {
+            luma: [0.0; 256],
+            r_cr: [0.0; 256],
+            g_cb: [0.0; 256],
+            g_cr: [0.0; 256],
+            b_cb: [0.0; 256],
+        };
+        for i in 0..256 {
+            let v = f64::from(i as u8);
+            let (yy, c) = if full_range {
+                (v, v - 128.0)
+            } else {
+                ((v - 16.0) * 255.0 / 219.0, (v - 128.0) * 255.0 / 224.0)
+            };
+            t.luma[i] = yy;
+            t.r_cr[i] = 1.402 * c;
+            t.g_cb[i] = 0.344_136 * c;
+            t.g_cr[i] = 0.714_136 * c;
+            t.b_cb[i] = 1.772 * c;
+        }
+        t
+    }
+}
+
+/// `x.round().clamp(0.0, 255.0) as u8` (halves away from zero, NaN → 0) without a call into
+/// libm: x86-64's baseline has no rounding instruction, and the call costs more than the rest
+/// of a pixel's conversion.
+fn round_byte(x: f64) -> u8 {
+    let c = x.clamp(-1.0, 256.0);
+    // Truncation towards zero; NaN becomes 0.
+    #[allow(clippy::cast_possible_truncation)]
+    let t = c as i64;
+    // Exact: c and t differ by less than 1.
+    let f = c - t as f64;
+    let r = if f >= 0.5 {
+        t + 1
+    } else if f <= -0.5 {
+        t - 1
+    } else {
+        t
+    };
+    #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+    let b = r.clamp(0, 255) as u8;
+    b
 }
 
 /// Writes frames as a YUV4MPEG2 stream: `Cmono` when every frame is grey (lossless), else full-range
@@ -984,6 +1050,105 @@ mod tests {
         assert_eq!(img.get_pixel(0, 0).0, [255, 255, 255]);
         assert_eq!(img.get_pixel(0, 1).0, [0, 0, 0]);
         assert!(r.read_frame().unwrap().is_none());
+    }
+
+    #[test]
+    fn round_byte_is_round_and_clamp() {
+        let mut xs = vec![
+            f64::NAN,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            -0.5,
+            0.5,
+            254.5,
+            255.5,
+        ];
+        xs.extend((-40_000..300_000).map(|i| f64::from(i) / 1000.0));
+        xs.extend([
+            0.499_999_999_999_999_94,
+            1.499_999_999_999_999_8,
+            -0.499_999_999_999_999_94,
+        ]);
+        for x in xs {
+            #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+            let want = x.round().clamp(0.0, 255.0) as u8;
+            assert_eq!(round_byte(x), want, "{x}");
+        }
+    }
+
+    /// The per-pixel formula the tables replace.
+    fn reference_rgb(yv: u8, u: u8, v: u8, full: bool, mono: bool) -> [u8; 3] {
+        let (yy, cb, cr) = if full {
+            (f64::from(yv), f64::from(u) - 128.0, f64::from(v) - 128.0)
+        } else {
+            (
+                (f64::from(yv) - 16.0) * 255.0 / 219.0,
+                (f64::from(u) - 128.0) * 255.0 / 224.0,
+                (f64::from(v) - 128.0) * 255.0 / 224.0,
+            )
+        };
+        #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+        let c = |x: f64| x.round().clamp(0.0, 255.0) as u8;
+        if mono {
+            return [c(yy); 3];
+        }
+        [
+            c(yy + 1.402 * cr),
+            c(yy - 0.344_136 * cb - 0.714_136 * cr),
+            c(yy + 1.772 * cb),
+        ]
+    }
+
+    #[test]
+    fn y4m_conversion_matches_the_formula_for_every_chroma() {
+        // 6×4 frames with varied bytes, every chroma layout and both ranges.
+        let (w, h) = (6usize, 4usize);
+        for (tag, cw, ch) in [
+            ("420jpeg", 3, 2),
+            ("422", 3, 4),
+            ("444", 6, 4),
+            ("mono", 0, 0),
+        ] {
+            for full in [true, false] {
+                let header = format!(
+                    "YUV4MPEG2 W{w} H{h} F30:1 C{tag}{}\nFRAME\n",
+                    if full { " XCOLORRANGE=FULL" } else { "" }
+                );
+                let planes: Vec<u8> = (0..w * h + 2 * cw * ch)
+                    .map(|i| ((i * 73 + 11) % 256) as u8)
+                    .collect();
+                let mut data = header.into_bytes();
+                data.extend(&planes);
+                let mut r =
+                    Y4mReader::new(Box::new(std::io::Cursor::new(data)), Path::new("x")).unwrap();
+                let img = r.read_frame().unwrap().unwrap();
+                for y in 0..h {
+                    for x in 0..w {
+                        let (u, v) = match tag {
+                            "mono" => (128, 128),
+                            "444" => (
+                                planes[w * h + y * cw + x],
+                                planes[w * h + cw * ch + y * cw + x],
+                            ),
+                            "422" => (
+                                planes[w * h + y * cw + x / 2],
+                                planes[w * h + cw * ch + y * cw + x / 2],
+                            ),
+                            _ => (
+                                planes[w * h + (y / 2) * cw + x / 2],
+                                planes[w * h + cw * ch + (y / 2) * cw + x / 2],
+                            ),
+                        };
+                        let want = reference_rgb(planes[y * w + x], u, v, full, tag == "mono");
+                        assert_eq!(
+                            img.get_pixel(x as u32, y as u32).0,
+                            want,
+                            "{tag} full={full} ({x}, {y})"
+                        );
+                    }
+                }
+            }
+        }
     }
 
     /// Fuzzing found a header token starting with a multi-byte character splitting inside it.

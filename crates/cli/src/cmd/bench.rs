@@ -96,6 +96,10 @@ fn print_report(r: &BenchReport) {
     for (name, ms, share) in r.shares() {
         println!("  {name:<30} {ms:>9.3} ms  {share:>5.1} %");
     }
+    println!(
+        "edge region: {:.1} % of the pixels (median)",
+        100.0 * r.edge_region_share
+    );
     if let Some(hwm) = r.peak_rss_kib {
         print!("peak memory (VmHWM): {:.1} MiB", hwm as f64 / 1024.0);
         if let (Some(a), Some(b)) = (r.rss_kib_after_warmup, r.rss_kib_end) {
