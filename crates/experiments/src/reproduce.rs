@@ -56,6 +56,8 @@ pub const CAMERA1: ([f64; 3], [f64; 3]) = ([1.0, -0.3, 0.6], [-0.1, 0.3, -0.1]);
 pub const HFOV_DEG: f64 = 65.0;
 /// Frame rate of the rendered video.
 pub const FPS: f64 = 30.0;
+/// Size of the rendered video's frames, pixels.
+pub const FRAME_SIZE: (u32, u32) = (640, 480);
 
 /// A held-out trial, ready to render.
 #[derive(Clone, Debug)]
@@ -165,7 +167,7 @@ fn camera(name: &str, eye: [f64; 3], target: [f64; 3]) -> Result<Camera> {
         Vector3::z(),
     )
     .ok_or_else(|| Error::Config("camera: degenerate look-at".into()))?;
-    let (w, h) = (640u32, 480u32);
+    let (w, h) = FRAME_SIZE;
     let f = f64::from(w) / 2.0 / (HFOV_DEG.to_radians() / 2.0).tan();
     Ok(Camera::centred(name, (w, h), f, pose))
 }

@@ -12,13 +12,8 @@
 
 use std::time::Instant;
 
-use actrack_render::synth::{Body, SceneSynth, Table};
-use actrack_render::{
-    ArmGeometry, Camera, ContourMethod, EdgeParams, EdgeWorkspace, LikelihoodModel, correct_arm,
-};
-use nalgebra::Vector3;
-use rand::{Rng, SeedableRng};
-use rand_pcg::Pcg64Mcg;
+use actrack_render::fixtures::{camera, edges, poses_around, scene, true_pose};
+use actrack_render::{ArmGeometry, ContourMethod, EdgeParams, EdgeWorkspace, LikelihoodModel};
 
 /// Per-call wall time of `f` run `inner` times, over `reps` repetitions, in ns:
 /// (minimum, median). On a loaded machine the minimum is the better estimate of the cost on an
@@ -35,18 +30,6 @@ fn time<F: FnMut()>(reps: usize, inner: usize, mut f: F) -> (f64, f64) {
         .collect();
     wall.sort_by(f64::total_cmp);
     (wall[0], wall[wall.len() / 2])
-}
-
-fn camera(w: u32, h: u32) -> Camera {
-    Camera::look_at(
-        Vector3::new(0.7, 1.9, 1.65),
-        Vector3::new(0.1, 0.25, 0.95),
-        Vector3::z(),
-        w,
-        h,
-        55f64.to_radians(),
-    )
-    .expect("camera")
 }
 
 fn main() {
@@ -66,20 +49,10 @@ fn main() {
     let which = args.next().unwrap_or_else(|| "all".to_owned());
     let scale: Option<usize> = args.next().and_then(|s| s.parse().ok());
     let reps = |default: usize| scale.unwrap_or(default);
-    let shoulder = [0.2, 0.0, 1.2];
-    let s = SceneSynth::new(
-        ArmGeometry::default(),
-        Some(Table {
-            center: [0.0, 0.5, 0.75],
-            half_extents: [0.8, 0.45],
-            yaw: 0.0,
-            thickness: 0.04,
-        }),
-        Some(Body::for_shoulder(shoulder, [0.0, 1.0], true)),
-    );
+    // The scene of the crate's tests and benches.
+    let s = scene();
     let g = ArmGeometry::default();
-    let mut pose = [0.2, 0.0, 1.2, 0.3, 0.15, 0.95, 0.25, 0.55, 0.8];
-    correct_arm(&g, &mut pose, None);
+    let pose = true_pose();
     for (name, w, h) in [("edge640", 640, 480), ("edge1080", 1920, 1080)] {
         if which != "all" && which != name {
             continue;
@@ -133,22 +106,8 @@ fn main() {
     if methods.is_empty() {
         return;
     }
-    let frame = s.render(&c640, &pose, 1).expect("frame");
-    let edges = [EdgeWorkspace::new()
-        .compute(frame.view(), &EdgeParams::default())
-        .expect("e")
-        .clone()];
-    let mut rng = Pcg64Mcg::seed_from_u64(5);
-    let poses: Vec<[f64; 9]> = (0..256)
-        .map(|_| {
-            let mut p = pose;
-            for x in &mut p[3..] {
-                *x += rng.random_range(-0.1..0.1);
-            }
-            correct_arm(&g, &mut p, None);
-            p
-        })
-        .collect();
+    let edges = [edges(&c640, 1)];
+    let poses = poses_around(256, 0.1, 5);
     for &method in methods {
         let n = actrack_render::contour_points(&c640, &g, &pose, method).len();
         let m = LikelihoodModel::new(vec![c640.clone()], g.clone(), 0.15, method).expect("model");

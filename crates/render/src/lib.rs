@@ -58,6 +58,8 @@ mod camera;
 mod contour;
 mod edge;
 mod error;
+#[doc(hidden)]
+pub mod fixtures;
 #[cfg(feature = "gpu")]
 pub mod gpu;
 mod image;

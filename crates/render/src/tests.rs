@@ -4,40 +4,11 @@
 use nalgebra::Vector3;
 use proptest::prelude::*;
 
-use crate::synth::{Body, SceneSynth, Table};
+use crate::fixtures::{SHOULDER, camera, scene};
 use crate::{
     ArmGeometry, Camera, ContourMethod, EdgeImage, EdgeParams, EdgeWorkspace, ImageView,
     LikelihoodModel, RenderError, correct_arm,
 };
-
-pub(crate) const SHOULDER: [f64; 3] = [0.2, 0.0, 1.2];
-
-fn camera(w: u32, h: u32) -> Camera {
-    // Across the table, facing the actor, a little to the side and above.
-    Camera::look_at(
-        Vector3::new(0.7, 1.9, 1.65),
-        Vector3::new(0.1, 0.25, 0.95),
-        Vector3::z(),
-        w,
-        h,
-        55f64.to_radians(),
-    )
-    .unwrap()
-}
-
-/// The test scene: default arm, a table in front, a body behind the shoulder.
-pub(crate) fn scene() -> SceneSynth {
-    SceneSynth::new(
-        ArmGeometry::default(),
-        Some(Table {
-            center: [0.0, 0.5, 0.75],
-            half_extents: [0.8, 0.45],
-            yaw: 0.0,
-            thickness: 0.04,
-        }),
-        Some(Body::for_shoulder(SHOULDER, [0.0, 1.0], true)),
-    )
-}
 
 /// Reaching poses toward table targets, corrected.
 fn poses() -> Vec<[f64; 9]> {

@@ -13,14 +13,16 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use actrack::TrackConfig;
 use actrack::manifest::Manifest;
 use actrack::mocap::ArmSide;
 use actrack::model::ActionModel;
 use actrack_experiments::generalisation;
+use actrack_experiments::prose::{Video, describe};
 use actrack_experiments::reproduce::{
-    Condition, ConditionResult, ModelKind, Segment, TestTrial, TrialSet, VideoRun, back_to_back,
-    cached_model, export_trial, load_conditions, rest_heights, run_condition, run_video,
-    subject_lengths, subject_setup, summarise, test_trials, two_action_label,
+    Condition, ConditionResult, FPS, FRAME_SIZE, ModelKind, Segment, TestTrial, TrialSet, VideoRun,
+    back_to_back, cached_model, export_trial, load_conditions, rest_heights, run_condition,
+    run_video, subject_lengths, subject_setup, summarise, test_trials, two_action_label,
 };
 use clap::Parser;
 use rayon::prelude::*;
@@ -342,36 +344,43 @@ fn write_docs(
             ", models from the cache".into()
         }
     );
-    md.push_str(
+    let (width, height) = FRAME_SIZE;
+    let _ = writeln!(
+        md,
         "## Setup\n\n\
          * **Motion is real, video is synthetic.** Models: UE-ADL subjects ADL001–ADL007, both \
          arms (left mirrored): `manifests/ue-adl-train.toml` (reach = forward + across, drink) and \
          `manifests/ue-adl3-train.toml` (reach-forward / reach-across / drink); 20 states. Test: \
          every right-arm trial of the held-out subjects ADL008–ADL010, their Vicon joint \
-         trajectories rendered into 640×480 video at 30 fps by the project's scene synthesis \
-         (textured clutter, table, torso, head, shaded arm, sensor noise new in every frame). \
-         The paper filmed one actor pointing and pushing; our actions are reach / drink.\n\
+         trajectories rendered into {width}×{height} video at {FPS} fps by the project's scene \
+         synthesis (textured clutter, table, torso, head, shaded arm, sensor noise new in every \
+         frame). The paper filmed one actor pointing and pushing; our actions are reach / drink.\n\
          * **Scene per subject, as a user's `scene.toml`.** The shoulder at (0, 0, 1) m; the \
          camera at (0.6, 1.3, 0.6) m from it looking at (−0.1, 0.3, −0.1), 65° horizontal field \
          of view (the second view: (1.0, −0.3, 0.6)); the table region the box around the \
          training targets padded by 5 cm; the table surface at the subject's rest height (the \
          fingertip's height in the first frames, where the hand rests on the table) and the \
-         renderer's arm lengths the subject's: both measured once per actor, like a calibration.\n\
-         * **Configurations.** `paper` is the method as the paper states it (400 particles, \
-         raster contours, SPEC's ε̄, one θ region for every action, joint resampling, causal \
-         5-frame median). `default` is what `actrack-cli track` runs with no flags \
-         (`presets/default.toml`, docs/configuration.md): 3200 particles with analytic \
-         contours, edge maps from the colour gradient, the short-contour penalty, a causal \
-         foreground gate dilated by 2 px, frames wider than 640 px shrunk to fit (these videos \
-         are 640 px wide), the fingertip floor on the scene's table, a cap of 0.8 on the \
-         models' dwell (last state kept), 90 % of the particles split evenly over the \
-         actions, each action's θ prior its training targets, and the pose reported as the centred 7-frame median (3 frames, 0.1 s, of latency; the \
-         causal row is the live-video figure). Each of these was chosen on the training \
-         subjects ADL001–004 and ADL006–007 rendered the same way (the colour gradient on \
-         ADL001–007 in randomised scene styles, and with it the gate's dilation and the 640 px \
-         width, see Generalisation below), never on the test subjects; the ablations below \
-         show what each is worth here.\n\
-         * **Metrics** (SPEC §5.4): per-component RMSE / MAE over all frames; table error = mean \
+         renderer's arm lengths the subject's: both measured once per actor, like a calibration.",
+    );
+    // The presets in words, from the presets themselves.
+    let video = Video { fps: FPS, width };
+    let default = TrackConfig::preset("default")?;
+    let _ = writeln!(
+        md,
+        "* **Configurations.** `paper` is the method as the paper states it \
+         (`presets/paper.toml`): {}. `default` is what `actrack-cli track` runs with no flags \
+         (`presets/default.toml`, docs/configuration.md): {}. The causal-median row is the \
+         live-video figure. Each of these was chosen on the training subjects ADL001–004 and \
+         ADL006–007 rendered the same way (the colour gradient on ADL001–007 in randomised \
+         scene styles, and with it the gate's dilation and the {} px width, see \
+         Generalisation below), never on the test subjects; the ablations below show what each \
+         is worth here.",
+        describe(&TrackConfig::preset("paper")?, video),
+        describe(&default, video),
+        default.observation.max_width,
+    );
+    md.push_str(
+        "* **Metrics** (SPEC §5.4): per-component RMSE / MAE over all frames; table error = mean \
          |r̂ − r| per component at each instance's frame of maximal extension; recognition = \
          argmax posterior at the instance's last frame; ms / frame = the session's step (edge \
          image, gate, filter), one thread per video, rendering excluded.\n\n",
