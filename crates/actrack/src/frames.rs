@@ -595,6 +595,8 @@ pub struct Y4mReader {
     pub fps: Option<f64>,
     frames_read: usize,
     buf: Vec<u8>,
+    /// The conversion's tables, made at the first frame.
+    tables: Option<Box<YuvTables>>,
 }
 
 impl Y4mReader {
@@ -679,6 +681,7 @@ impl Y4mReader {
             fps,
             frames_read: 0,
             buf: Vec::new(),
+            tables: None,
         })
     }
 
@@ -726,12 +729,14 @@ impl Y4mReader {
         Ok(Some(self.to_rgb()))
     }
 
-    fn to_rgb(&self) -> RgbImage {
+    fn to_rgb(&mut self) -> RgbImage {
         let (w, h) = (self.width, self.height);
         let (ysz, cw, ch) = self.plane_sizes();
+        let t = self
+            .tables
+            .get_or_insert_with(|| Box::new(YuvTables::new(self.full_range)));
         let (yp, rest) = self.buf.split_at(ysz);
         let (up, vp) = rest.split_at(cw * ch);
-        let t = YuvTables::new(self.full_range);
         let mut data = vec![0u8; 3 * w * h];
         for (y, (out, yrow)) in data
             .chunks_exact_mut(3 * w)
@@ -739,33 +744,24 @@ impl Y4mReader {
             .enumerate()
         {
             let crow = match self.chroma {
-                Chroma::Mono => 0,
+                Chroma::Mono => {
+                    for (px, &yv) in out.chunks_exact_mut(3).zip(yrow) {
+                        px.fill(t.mono[usize::from(yv)]);
+                    }
+                    continue;
+                }
                 Chroma::C444 | Chroma::C422 => y,
                 Chroma::C420 => y / 2,
             };
-            let (urow, vrow) = if self.chroma == Chroma::Mono {
-                (&[][..], &[][..])
-            } else {
-                (
-                    &up[crow * cw..(crow + 1) * cw],
-                    &vp[crow * cw..(crow + 1) * cw],
-                )
-            };
+            let urow = &up[crow * cw..(crow + 1) * cw];
+            let vrow = &vp[crow * cw..(crow + 1) * cw];
+            let shift = usize::from(self.chroma != Chroma::C444);
             for (x, (px, &yv)) in out.chunks_exact_mut(3).zip(yrow).enumerate() {
-                let yy = t.luma[usize::from(yv)];
-                if self.chroma == Chroma::Mono {
-                    px.fill(round_byte(yy));
-                    continue;
-                }
-                let cx = if self.chroma == Chroma::C444 {
-                    x
-                } else {
-                    x / 2
-                };
-                let (u, v) = (usize::from(urow[cx]), usize::from(vrow[cx]));
-                px[0] = round_byte(yy + t.r_cr[v]);
-                px[1] = round_byte(yy - t.g_cb[u] - t.g_cr[v]);
-                px[2] = round_byte(yy + t.b_cb[u]);
+                let (u, v) = (usize::from(urow[x >> shift]), usize::from(vrow[x >> shift]));
+                let yi = usize::from(yv) << 8;
+                px[0] = t.r[yi | v];
+                px[1] = round_byte(t.luma[yi >> 8] - t.g_cb[u] - t.g_cr[v]);
+                px[2] = t.b[yi | u];
             }
         }
         // The buffer holds exactly w·h pixels.
@@ -773,27 +769,28 @@ impl Y4mReader {
     }
 }
 
-/// The terms of the YCbCr → RGB conversion (BT.601, full or limited range) for every byte
-/// value, each computed as the per-pixel formula computes it:
-/// R = Y′ + 1.402·Cr, G = Y′ − 0.344136·Cb − 0.714136·Cr, B = Y′ + 1.772·Cb with Y′, Cb, Cr
-/// the byte values rescaled (limited range: (Y − 16)·255/219, (C − 128)·255/224).
+/// The YCbCr → RGB conversion (BT.601, full or limited range) by tables, each entry computed
+/// as the per-pixel formula computes it: R = Y′ + 1.402·Cr, G = Y′ − 0.344136·Cb − 0.714136·Cr,
+/// B = Y′ + 1.772·Cb, rounded and clamped to bytes, with Y′, Cb, Cr the byte values rescaled
+/// (limited range: (Y − 16)·255/219, (C − 128)·255/224). R depends on (Y, Cr) and B on
+/// (Y, Cb) only, so they are read whole from 64 KiB tables; G from the terms of its bytes.
 struct YuvTables {
     luma: [f64; 256],
-    r_cr: [f64; 256],
     g_cb: [f64; 256],
     g_cr: [f64; 256],
-    b_cb: [f64; 256],
+    /// R of (Y, Cr) at `Y·256 + Cr`.
+    r: Vec<u8>,
+    /// B of (Y, Cb) at `Y·256 + Cb`.
+    b: Vec<u8>,
+    /// The grey of a mono stream.
+    mono: [u8; 256],
 }
 
 impl YuvTables {
     fn new(full_range: bool) -> Self {
-        let mut t = Self {
-            luma: [0.0; 256],
-            r_cr: [0.0; 256],
-            g_cb: [0.0; 256],
-            g_cr: [0.0; 256],
-            b_cb: [0.0; 256],
-        };
+        let mut luma = [0.0; 256];
+        let (mut r_cr, mut g_cb, mut g_cr, mut b_cb) =
+            ([0.0; 256], [0.0; 256], [0.0; 256], [0.0; 256]);
         for i in 0..256 {
             let v = f64::from(i as u8);
             let (yy, c) = if full_range {
@@ -801,13 +798,25 @@ impl YuvTables {
             } else {
                 ((v - 16.0) * 255.0 / 219.0, (v - 128.0) * 255.0 / 224.0)
             };
-            t.luma[i] = yy;
-            t.r_cr[i] = 1.402 * c;
-            t.g_cb[i] = 0.344_136 * c;
-            t.g_cr[i] = 0.714_136 * c;
-            t.b_cb[i] = 1.772 * c;
+            luma[i] = yy;
+            r_cr[i] = 1.402 * c;
+            g_cb[i] = 0.344_136 * c;
+            g_cr[i] = 0.714_136 * c;
+            b_cb[i] = 1.772 * c;
         }
-        t
+        let pairs = |term: &[f64; 256]| -> Vec<u8> {
+            (0..256 * 256)
+                .map(|i| round_byte(luma[i >> 8] + term[i & 255]))
+                .collect()
+        };
+        Self {
+            r: pairs(&r_cr),
+            b: pairs(&b_cb),
+            mono: luma.map(round_byte),
+            luma,
+            g_cb,
+            g_cr,
+        }
     }
 }
 
@@ -821,13 +830,8 @@ fn round_byte(x: f64) -> u8 {
     let t = c as i64;
     // Exact: c and t differ by less than 1.
     let f = c - t as f64;
-    let r = if f >= 0.5 {
-        t + 1
-    } else if f <= -0.5 {
-        t - 1
-    } else {
-        t
-    };
+    // Flags, not branches: the fraction is as good as random, a branch would mispredict.
+    let r = t + i64::from(f >= 0.5) - i64::from(f <= -0.5);
     #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
     let b = r.clamp(0, 255) as u8;
     b

@@ -3,7 +3,7 @@
 //! preset holds, not what it held when the page was last edited by hand.
 
 use actrack::TrackConfig;
-use actrack::config::{Contour, FloorSetting, Gradient, Median, ThetaPrior};
+use actrack::config::{Contour, EdgeRegion, FloorSetting, Gradient, Median, ThetaPrior};
 
 /// The video a configuration tracks, for the settings whose effect depends on it.
 #[derive(Clone, Copy, Debug)]
@@ -56,6 +56,9 @@ pub fn describe(c: &TrackConfig, video: Video) -> String {
             "a causal foreground gate dilated by {} px",
             o.foreground_gate.radius
         ));
+    }
+    if o.edge_region == EdgeRegion::Particles {
+        items.push("edge maps computed only where the particles' arms project".to_owned());
     }
     if o.max_width > 0 {
         let shrink = video.width.div_ceil(o.max_width);
@@ -175,8 +178,9 @@ mod tests {
         assert_eq!(
             describe(&c, VIDEO),
             "3200 particles with analytic contours, edge maps from the colour gradient, the \
-             short-contour penalty, a causal foreground gate dilated by 2 px, frames wider than \
-             640 px shrunk to fit (these videos are 640 px wide), the fingertip floor on the \
+             short-contour penalty, a causal foreground gate dilated by 2 px, edge maps \
+             computed only where the particles' arms project, frames wider than 640 px shrunk \
+             to fit (these videos are 640 px wide), the fingertip floor on the \
              scene's table, a cap of 0.8 on the models' dwell (last state kept), 90 % of the \
              particles split evenly over the actions, each action's θ prior its training \
              targets, and the pose reported as the centred 7-frame median (3 frames, 0.1 s, of \

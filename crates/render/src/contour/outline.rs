@@ -484,7 +484,7 @@ impl Run {
 }
 
 /// Receives the pieces of a part's analytic outline from [`Prepared::sample_outline`]: the
-/// geometry of the samples, shared by the CPU sampler ([`Run`]) and the GPU port (`gpu.rs`), so
+/// geometry of the samples, shared by the CPU sampler ([`Run`]) and the GPU port (`gpu/pieces.rs`), so
 /// that both sample the same points.
 pub(crate) trait OutlineSink {
     /// `n` points `p + (q − p)·k/n`, k = 0 … n−1.
