@@ -726,10 +726,10 @@ impl Y4mReader {
             ));
         }
         self.frames_read += 1;
-        Ok(Some(self.to_rgb()))
+        Ok(Some(self.convert_frame()))
     }
 
-    fn to_rgb(&mut self) -> RgbImage {
+    fn convert_frame(&mut self) -> RgbImage {
         let (w, h) = (self.width, self.height);
         let (ysz, cw, ch) = self.plane_sizes();
         let t = self
