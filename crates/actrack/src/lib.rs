@@ -27,6 +27,10 @@ pub mod style;
 pub mod synth;
 pub mod track_csv;
 pub mod train;
+
+#[cfg(test)]
+mod fuzz_tests;
+
 /// The numeric kernels the facade is built on, for users who need them directly (the HMM and
 /// PHMM, the renderer and edge image, the action-space particle filter).
 pub use actrack_pf as pf;

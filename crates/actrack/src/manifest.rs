@@ -31,7 +31,7 @@
 
 use std::path::{Path, PathBuf};
 
-use serde::{Deserialize, Deserializer, Serialize};
+use serde::{Deserialize, Serialize};
 use toml::Spanned;
 
 use crate::error::{Error, Result};
@@ -301,30 +301,6 @@ fn line_of(text: &str, byte: usize) -> usize {
         .filter(|&&b| b == b'\n')
         .count()
         + 1
-}
-
-/// Deserialises an optional value that may also be written as `false` (off) or a keyword.
-pub(crate) fn off_or<'de, D, T>(d: D) -> std::result::Result<Option<T>, D::Error>
-where
-    D: Deserializer<'de>,
-    T: Deserialize<'de>,
-{
-    #[derive(Deserialize)]
-    #[serde(untagged)]
-    enum OffOr<T> {
-        Flag(bool),
-        Word(String),
-        Value(T),
-    }
-    match Option::<OffOr<T>>::deserialize(d)? {
-        None | Some(OffOr::Flag(false)) => Ok(None),
-        Some(OffOr::Value(v)) => Ok(Some(v)),
-        Some(OffOr::Flag(true)) => Err(serde::de::Error::custom(
-            "`true` is not a value here: give the settings or `false`",
-        )),
-        Some(OffOr::Word(w)) if w == "capture" || w == "off" || w == "none" => Ok(None),
-        Some(OffOr::Word(w)) => Err(serde::de::Error::custom(format!("unexpected `{w}`"))),
-    }
 }
 
 #[cfg(test)]

@@ -28,9 +28,6 @@ pub mod markerset;
 pub mod trial;
 pub mod vicon;
 
-#[cfg(test)]
-mod fuzz_tests;
-
 use std::io::Read;
 use std::path::{Path, PathBuf};
 

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
 use nalgebra::Vector3;
-use serde::{Deserialize, Serialize};
+use serde::{Deserialize, Deserializer, Serialize};
 
 use super::actor::{ActorFrame, Heading};
 use super::markerset::{Calibration, MarkerSet};
@@ -66,10 +66,10 @@ pub struct Preprocessing {
     /// Longest gap (frames) filled by linear interpolation (default 10 = 0.1 s at 100 Hz).
     pub max_gap: usize,
     /// Target frame rate in Hz (the video's); `None` keeps the capture rate.
-    #[serde(deserialize_with = "crate::manifest::off_or")]
+    #[serde(deserialize_with = "off_or")]
     pub frame_rate: Option<f64>,
     /// Trimming of rest phases; `None` keeps whole trials.
-    #[serde(deserialize_with = "crate::manifest::off_or")]
+    #[serde(deserialize_with = "off_or")]
     pub trim: Option<TrimOptions>,
     /// Heading of the actor frame.
     pub heading: Heading,
@@ -542,6 +542,30 @@ pub fn median(mut v: Vec<f64>) -> f64 {
         v[n / 2]
     } else {
         0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+/// Deserialises an optional value that may also be written as `false` (off) or a keyword.
+pub(crate) fn off_or<'de, D, T>(d: D) -> std::result::Result<Option<T>, D::Error>
+where
+    D: Deserializer<'de>,
+    T: Deserialize<'de>,
+{
+    #[derive(Deserialize)]
+    #[serde(untagged)]
+    enum OffOr<T> {
+        Flag(bool),
+        Word(String),
+        Value(T),
+    }
+    match Option::<OffOr<T>>::deserialize(d)? {
+        None | Some(OffOr::Flag(false)) => Ok(None),
+        Some(OffOr::Value(v)) => Ok(Some(v)),
+        Some(OffOr::Flag(true)) => Err(serde::de::Error::custom(
+            "`true` is not a value here: give the settings or `false`",
+        )),
+        Some(OffOr::Word(w)) if w == "capture" || w == "off" || w == "none" => Ok(None),
+        Some(OffOr::Word(w)) => Err(serde::de::Error::custom(format!("unexpected `{w}`"))),
     }
 }
 

@@ -1,12 +1,13 @@
-//! Property tests: random and mutated bytes fed to every parser never panic, only error.
+//! Property tests: random and mutated bytes fed to every parser (motion capture, manifests,
+//! model files) never panic, only error.
 
 use std::fmt::Write as _;
 use std::path::Path;
 
 use proptest::prelude::*;
 
-use super::{c3d, decompress, joints_csv, vicon};
 use crate::manifest::Manifest;
+use crate::mocap::{c3d, decompress, joints_csv, vicon};
 use crate::model::ActionModel;
 
 fn vicon_sample() -> String {
