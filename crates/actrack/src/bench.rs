@@ -4,7 +4,7 @@
 //! so users can check the real-time budget on their own machine.
 //!
 //! The stages are the session's own marks ([`crate::session::StageTimes`]): edge images (with
-//! normalisation and gate), resample | propagate + sample | render + contour + likelihood |
+//! normalisation), the foreground gate, resample | propagate + sample | render + contour + likelihood |
 //! weights + estimates, and the gate's background update. Peak memory is the process's `VmHWM`
 //! from `/proc/self/status` (Linux).
 
@@ -66,8 +66,10 @@ impl Default for BenchOptions {
 /// Per-frame medians of the stages, milliseconds.
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct StageMedians {
-    /// Edge image G of every view.
+    /// Edge image G of every view (its region, normalisation).
     pub edge_image: f64,
+    /// The foreground gate's mask and product with G.
+    pub foreground: f64,
     /// Resampling (SPEC §3.6).
     pub resample: f64,
     /// Propagation and pose sampling + arm correction (§3.3, §3.4).
@@ -128,10 +130,11 @@ pub struct BenchReport {
 
 impl BenchReport {
     /// The share of each stage in the sum of the stage medians, percent, in display order.
-    pub fn shares(&self) -> [(&'static str, f64, f64); 6] {
+    pub fn shares(&self) -> [(&'static str, f64, f64); 7] {
         let s = &self.stages_ms;
         let rows = [
             ("edge image", s.edge_image),
+            ("foreground gate", s.foreground),
             ("resample", s.resample),
             ("propagate + sample", s.propagate_sample),
             ("render + contour + likelihood", s.likelihood),
@@ -270,7 +273,7 @@ pub fn run_bench(opts: &BenchOptions) -> Result<BenchReport> {
     let mut session = Session::new(&prep.model, &prep.scene, &opts.config)?;
     let setup_seconds = setup.elapsed().as_secs_f64();
     let mut per_frame = Vec::with_capacity(opts.frames);
-    let mut st: [Vec<f64>; 6] = Default::default();
+    let mut st: [Vec<f64>; 7] = Default::default();
     let mut shares = Vec::with_capacity(opts.frames * opts.views);
     let mut rss_after_warmup = None;
     pool.install(|| -> Result<()> {
@@ -292,6 +295,7 @@ pub fn run_bench(opts: &BenchOptions) -> Result<BenchReport> {
                 per_frame.push(times.total);
                 let stages = [
                     times.edges,
+                    times.foreground,
                     times.resample,
                     times.propagate,
                     times.likelihood,
@@ -337,11 +341,12 @@ pub fn run_bench(opts: &BenchOptions) -> Result<BenchReport> {
         fps: if med > 0.0 { 1e3 / med } else { f64::INFINITY },
         stages_ms: StageMedians {
             edge_image: median(&st[0]),
-            resample: median(&st[1]),
-            propagate_sample: median(&st[2]),
-            likelihood: median(&st[3]),
-            estimates: median(&st[4]),
-            background: median(&st[5]),
+            foreground: median(&st[1]),
+            resample: median(&st[2]),
+            propagate_sample: median(&st[3]),
+            likelihood: median(&st[4]),
+            estimates: median(&st[5]),
+            background: median(&st[6]),
         },
         edge_region_share: median(&shares),
         peak_rss_kib: hwm,

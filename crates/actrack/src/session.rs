@@ -57,8 +57,10 @@ pub struct FrameResult {
 /// Wall-clock milliseconds of the last step's stages.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
 pub struct StageTimes {
-    /// Edge images of every view (with normalisation and gate).
+    /// Edge images of every view (the region, shrinking, G and its normalisation).
     pub edges: f64,
+    /// The foreground gate's mask and its product with G, every view.
+    pub foreground: f64,
     /// Resampling (SPEC §3.6).
     pub resample: f64,
     /// Propagation, pose sampling and arm correction (SPEC §3.3, §3.4).
@@ -370,6 +372,7 @@ impl Session {
         let t1 = Instant::now();
         let err = |e: actrack_render::RenderError| Error::Config(format!("frame {frame}: {e}"));
         let regions = self.edge_regions();
+        let mut gate_ms = 0.0;
         for (v, img) in images.iter().enumerate() {
             let stage = &mut self.views[v];
             if stage.factor > 1 {
@@ -392,6 +395,7 @@ impl Session {
                 &params,
                 *img,
                 regions[v],
+                &mut gate_ms,
             )
             .map_err(|e| match e {
                 Error::Config(m) => Error::Config(format!("frame {frame}: {m}")),
@@ -429,7 +433,8 @@ impl Session {
         }
         let background = t2.elapsed().as_secs_f64() * 1e3;
         self.times = StageTimes {
-            edges: edges_ms,
+            edges: edges_ms - gate_ms,
+            foreground: gate_ms,
             resample,
             propagate,
             likelihood,
@@ -496,7 +501,7 @@ impl Session {
 
 /// The edge image `out` of one view from its frame `img` (shrunk by the stage first, if it
 /// shrinks): the whole frame, or `keep` and the halo its filters need, pasted into a frame-sized
-/// image that is 0 elsewhere.
+/// image that is 0 elsewhere. The gate's time is added to `gate_ms`.
 fn view_edges(
     stage: &mut ViewStage,
     out: &mut EdgeImage,
@@ -504,6 +509,7 @@ fn view_edges(
     params: &actrack_render::EdgeParams,
     img: ImageView<'_>,
     keep: Option<PixelRect>,
+    gate_ms: &mut f64,
 ) -> Result<()> {
     let err = |e: actrack_render::RenderError| Error::Config(e.to_string());
     let ViewStage {
@@ -564,8 +570,10 @@ fn view_edges(
     }
     *gated = region.map(|(_, r)| r);
     if obs_cfg.foreground_gate.enabled {
+        let t = Instant::now();
         let rect = region.map_or(PixelRect::full(w, h), |(_, r)| r);
         gate.apply_region(&obs_cfg.foreground_gate, img, rect, pixels, target)?;
+        *gate_ms += t.elapsed().as_secs_f64() * 1e3;
     }
     *kept = match region {
         Some((k, r)) => {
