@@ -6,7 +6,7 @@
 //! floor, x along the table's near edge (to the actor's right), y across the table away from the
 //! actor, z up; the table surface is at `table_height`. The corners are given in the order
 //! near-left, near-right, far-right, far-left as the actor sees them (the order of
-//! [`crate::scene::TableRegion::corners`]).
+//! [`crate::scene::SceneTable::corners`]).
 //!
 //! The pose comes from SQPnP (`sqpnp_simple`, globally optimal for any number of points including
 //! the planar case) on the undistorted corners, refined by Levenberg–Marquardt on the distorted
@@ -20,7 +20,7 @@ use image::{Rgb, RgbImage};
 use nalgebra::{Matrix3, Matrix6, Rotation3, Vector3, Vector6};
 
 use crate::error::{Error, Result};
-use crate::scene::{ArmGeometry, Camera, EdgeSettings, Placement, Scene, Side, TableRegion};
+use crate::scene::{ArmSettings, SceneCamera, EdgeSettings, Placement, Scene, Side, SceneTable};
 
 /// Camera intrinsics: focal lengths and principal point in pixels, OpenCV's Brown distortion.
 #[derive(Clone, Debug, PartialEq)]
@@ -158,8 +158,8 @@ impl Intrinsics {
         })
     }
 
-    fn camera(&self, width: u32, height: u32, r_cw: Matrix3<f64>, t_cw: Vector3<f64>) -> Camera {
-        Camera::new(
+    fn camera(&self, width: u32, height: u32, r_cw: Matrix3<f64>, t_cw: Vector3<f64>) -> SceneCamera {
+        SceneCamera::new(
             "camera0",
             (width, height),
             [self.fx, self.fy, self.cx, self.cy],
@@ -497,7 +497,7 @@ pub fn check_quadrilateral(c: &[[f64; 2]]) -> Result<()> {
     Ok(())
 }
 
-fn residuals(cam: &Camera, world: &[Vector3<f64>], px: &[[f64; 2]], out: &mut [f64]) -> bool {
+fn residuals(cam: &SceneCamera, world: &[Vector3<f64>], px: &[[f64; 2]], out: &mut [f64]) -> bool {
     for (i, (x, p)) in world.iter().zip(px).enumerate() {
         let Some((u, v)) = cam.project(x) else {
             return false;
@@ -672,12 +672,12 @@ pub fn calibrate(input: &CalibrationInput) -> Result<Calibration> {
         origin: Vector3::new(0.0, 0.0, input.table_height),
         yaw: 0.0,
     };
-    let world = TableRegion {
+    let world = SceneTable {
         placement,
         half_extents: [sx / 2.0, sy / 2.0],
     }
     .corners();
-    let table = TableRegion {
+    let table = SceneTable {
         placement,
         half_extents: [rx / 2.0, ry / 2.0],
     };
@@ -762,7 +762,7 @@ pub fn calibrate(input: &CalibrationInput) -> Result<Calibration> {
         table,
         actor: Placement { origin, yaw: 0.0 },
         side: input.side,
-        arm: ArmGeometry::default(),
+        arm: ArmSettings::default(),
         edges: input.edges.clone(),
     };
     Ok(Calibration {
@@ -782,7 +782,7 @@ fn put(img: &mut RgbImage, u: f64, v: f64, c: [u8; 3]) {
 }
 
 /// Draws the world segment a–b, projected point by point (so distortion bends it).
-fn world_line(img: &mut RgbImage, cam: &Camera, a: &Vector3<f64>, b: &Vector3<f64>, c: [u8; 3]) {
+fn world_line(img: &mut RgbImage, cam: &SceneCamera, a: &Vector3<f64>, b: &Vector3<f64>, c: [u8; 3]) {
     let (Some(pa), Some(pb)) = (cam.project(a), cam.project(b)) else {
         return;
     };

@@ -20,7 +20,7 @@ use crate::frames::{FrameOptions, FrameSource};
 use crate::model::{Action, ActionModel, ArmLengths, Provenance, THETA_FRAME};
 use crate::motion::{ACTIONS, demonstrations};
 use crate::pipeline::{TrackOutputs, TrackSummary, track};
-use crate::scene::{Camera, Scene, default_scene, look_at};
+use crate::scene::{SceneCamera, Scene, default_scene, look_at};
 use crate::synth::{
     MotionSource, motion_params, random_targets, render_frames, save_frames, sequence,
 };
@@ -204,7 +204,7 @@ pub fn demo_scene(width: u32, height: u32) -> Scene {
     let target = shoulder + nalgebra::Vector3::new(-0.1, 0.3, -0.1);
     let f = 0.5 * f64::from(width) / (0.5 * 65f64.to_radians()).tan();
     if let Some(pose) = look_at(eye, target, nalgebra::Vector3::z()) {
-        scene.cameras = vec![Camera::centred("camera0", (width, height), f, pose)];
+        scene.cameras = vec![SceneCamera::centred("camera0", (width, height), f, pose)];
     }
     scene
 }

@@ -164,7 +164,7 @@ pub enum Side {
 /// Optional `[arm]` rendering geometry (SPEC §4.2 defaults when absent).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct ArmGeometry {
+pub struct ArmSettings {
     /// Upper-arm radii at shoulder and elbow, metres.
     #[serde(default = "d_upper")]
     pub upper_arm_radii: [f64; 2],
@@ -198,7 +198,7 @@ fn d_frac() -> f64 {
     0.6
 }
 
-impl Default for ArmGeometry {
+impl Default for ArmSettings {
     fn default() -> Self {
         Self {
             upper_arm_radii: d_upper(),
@@ -223,7 +223,7 @@ pub struct SceneToml {
     pub actor: ActorToml,
     /// Rendering geometry of the arm.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub arm: Option<ArmGeometry>,
+    pub arm: Option<ArmSettings>,
     /// Edge-image parameters of SPEC §4.1 (optional `[edges]` table).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub edges: Option<EdgeSettings>,
@@ -268,14 +268,14 @@ impl Default for EdgeSettings {
 /// A camera of the scene: the calibrated pinhole camera the renderer projects with (SPEC §4.5)
 /// and its name, the frame id of its views in the MCAP track.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Camera {
+pub struct SceneCamera {
     /// Name, used as the MCAP frame id.
     pub name: String,
     /// Size, intrinsics, distortion and world → camera pose.
     pub model: actrack_render::Camera,
 }
 
-impl Camera {
+impl SceneCamera {
     /// A distortion-free camera of `width`×`height` pixels with focal length `f` (pixels) in
     /// both axes, its principal point at the image centre, and the world → camera pose
     /// (`r_cw`, `t_cw`).
@@ -392,14 +392,14 @@ impl Placement {
 
 /// The table region R (SPEC §3.1): a rectangle on the table plane.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct TableRegion {
+pub struct SceneTable {
     /// Centre on the table surface (world) and heading of the table's axes.
     pub placement: Placement,
     /// Half-extents along the table's x and y.
     pub half_extents: [f64; 2],
 }
 
-impl TableRegion {
+impl SceneTable {
     /// The four corners in the world (on the table surface).
     pub fn corners(&self) -> [Vector3<f64>; 4] {
         let [hx, hy] = self.half_extents;
@@ -412,15 +412,15 @@ impl TableRegion {
 #[derive(Clone, Debug, PartialEq)]
 pub struct Scene {
     /// The cameras (at least one).
-    pub cameras: Vec<Camera>,
+    pub cameras: Vec<SceneCamera>,
     /// The table region.
-    pub table: TableRegion,
+    pub table: SceneTable,
     /// The actor frame's placement in the world.
     pub actor: Placement,
     /// The acting arm.
     pub side: Side,
     /// Rendering geometry of the arm.
-    pub arm: ArmGeometry,
+    pub arm: ArmSettings,
     /// Edge-image parameters (SPEC §4.1).
     pub edges: EdgeSettings,
 }
@@ -472,7 +472,7 @@ impl Scene {
         if !finite(&t.centre) || !t.height.is_finite() || !t.yaw_deg.is_finite() {
             return Err(bad("table", "centre, height and yaw_deg must be finite"));
         }
-        let table = TableRegion {
+        let table = SceneTable {
             placement: Placement {
                 origin: Vector3::new(t.centre[0], t.centre[1], t.height),
                 yaw: t.yaw_deg.to_radians(),
@@ -761,7 +761,7 @@ pub fn look_at(
     Some((r, t))
 }
 
-fn camera_from_toml(c: &CameraToml, i: usize, path: &Path) -> Result<Camera> {
+fn camera_from_toml(c: &CameraToml, i: usize, path: &Path) -> Result<SceneCamera> {
     let bad = |field: &str, msg: &str| Error::invalid(path, format!("camera[{i}].{field}: {msg}"));
     if c.width == 0 || c.height == 0 {
         return Err(bad("width/height", "must be positive"));
@@ -842,7 +842,7 @@ fn camera_from_toml(c: &CameraToml, i: usize, path: &Path) -> Result<Camera> {
     if !finite(&distortion) {
         return Err(bad("k1/k2/p1/p2/k3", "must be finite"));
     }
-    Ok(Camera::new(
+    Ok(SceneCamera::new(
         &c.name.clone().unwrap_or_else(|| format!("camera{i}")),
         (c.width, c.height),
         [c.fx, c.fy, c.cx, c.cy],
@@ -864,8 +864,8 @@ pub fn default_scene(width: u32, height: u32) -> Scene {
     let pose =
         look_at(eye, target, Vector3::z()).unwrap_or((Matrix3::identity(), Vector3::zeros()));
     Scene {
-        cameras: vec![Camera::centred("camera0", (width, height), f, pose)],
-        table: TableRegion {
+        cameras: vec![SceneCamera::centred("camera0", (width, height), f, pose)],
+        table: SceneTable {
             placement: Placement {
                 origin: Vector3::new(0.0, 0.5, 0.75),
                 yaw: 0.0,
@@ -877,7 +877,7 @@ pub fn default_scene(width: u32, height: u32) -> Scene {
             yaw: 0.0,
         },
         side: Side::Right,
-        arm: ArmGeometry::default(),
+        arm: ArmSettings::default(),
         // Below SPEC's 0.2: the rendered arm's edges against the table are weak, and higher
         // thresholds lose part of its outline.
         edges: EdgeSettings {

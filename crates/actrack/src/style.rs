@@ -16,7 +16,7 @@ use rand_pcg::Pcg64Mcg;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
-use crate::scene::{Camera, Scene, look_at};
+use crate::scene::{SceneCamera, Scene, look_at};
 use crate::synth::scene_synth;
 
 /// Where the camera is, in the actor's frame, and what it is.
@@ -320,7 +320,7 @@ impl Style {
     ///
     /// # Errors
     /// [`Error::Config`] if the camera cannot look at the workspace (a degenerate direction).
-    pub fn camera_in(&self, scene: &Scene) -> Result<Camera> {
+    pub fn camera_in(&self, scene: &Scene) -> Result<SceneCamera> {
         let c = &self.camera;
         let (centre, _) = scene.theta_region();
         let table_z = scene.table_height();
@@ -332,7 +332,7 @@ impl Style {
         let pose = look_at(eye, target, Vector3::z())
             .ok_or_else(|| Error::Config("style: the camera looks straight down".into()))?;
         let f = f64::from(c.width) / 2.0 / (c.hfov_deg.to_radians() / 2.0).tan();
-        let mut cam = Camera::centred("camera0", (c.width, c.height), f, pose);
+        let mut cam = SceneCamera::centred("camera0", (c.width, c.height), f, pose);
         cam.model.distortion = c.distortion;
         Ok(cam)
     }

@@ -9,7 +9,7 @@
 
 use std::path::Path;
 
-use actrack::scene::{Camera, Scene};
+use actrack::scene::{SceneCamera, Scene};
 use nalgebra::{Matrix3, Rotation3, Vector3};
 use serde_json::Value;
 
@@ -27,12 +27,12 @@ fn cases() -> Vec<Value> {
     v["cases"].as_array().unwrap().clone()
 }
 
-fn camera(c: &Value) -> Camera {
+fn camera(c: &Value) -> SceneCamera {
     let k = nums(&c["camera_matrix"]);
     let d = nums(&c["dist_coeffs"]);
     let r = nums(&c["rotation"]);
     let t = nums(&c["tvec"]);
-    Camera::new(
+    SceneCamera::new(
         "cv",
         (
             c["width"].as_u64().unwrap() as u32,

@@ -8,7 +8,7 @@ use std::path::Path;
 use std::process::Command;
 
 use actrack::calibrate::{CalibrationInput, Intrinsics, ShoulderHeight, calibrate};
-use actrack::scene::{Camera, EdgeSettings, Placement, Side, TableRegion, look_at};
+use actrack::scene::{SceneCamera, EdgeSettings, Placement, Side, SceneTable, look_at};
 use nalgebra::Vector3;
 use rand::{Rng, SeedableRng};
 
@@ -17,8 +17,8 @@ const BIN: &str = env!("CARGO_BIN_EXE_actrack-cli");
 const TABLE_HEIGHT: f64 = 0.75;
 const TABLE_SIZE: [f64; 2] = [1.2, 0.8];
 
-fn table() -> TableRegion {
-    TableRegion {
+fn table() -> SceneTable {
+    SceneTable {
         placement: Placement {
             origin: Vector3::new(0.0, 0.0, TABLE_HEIGHT),
             yaw: 0.0,
@@ -28,8 +28,8 @@ fn table() -> TableRegion {
 }
 
 /// A camera at `eye` looking at `target` (world = the table's frame of `calibrate`).
-fn camera(eye: Vector3<f64>, target: Vector3<f64>, f: f64, distortion: [f64; 5]) -> Camera {
-    let mut c = Camera::centred(
+fn camera(eye: Vector3<f64>, target: Vector3<f64>, f: f64, distortion: [f64; 5]) -> SceneCamera {
+    let mut c = SceneCamera::centred(
         "camera0",
         (640, 480),
         f,
@@ -39,7 +39,7 @@ fn camera(eye: Vector3<f64>, target: Vector3<f64>, f: f64, distortion: [f64; 5])
     c
 }
 
-fn input(cam: &Camera, corners: Vec<[f64; 2]>, shoulder: [f64; 2], above: f64) -> CalibrationInput {
+fn input(cam: &SceneCamera, corners: Vec<[f64; 2]>, shoulder: [f64; 2], above: f64) -> CalibrationInput {
     CalibrationInput {
         width: cam.model.width,
         height: cam.model.height,
@@ -63,7 +63,7 @@ fn input(cam: &Camera, corners: Vec<[f64; 2]>, shoulder: [f64; 2], above: f64) -
     }
 }
 
-fn project_all(cam: &Camera, pts: &[Vector3<f64>]) -> Vec<[f64; 2]> {
+fn project_all(cam: &SceneCamera, pts: &[Vector3<f64>]) -> Vec<[f64; 2]> {
     pts.iter()
         .map(|x| {
             let (u, v) = cam.project(x).unwrap();
@@ -134,7 +134,7 @@ fn recovers_pose_from_exact_corners_on_20_random_placements() {
 }
 
 /// The scene of the binary tests: a camera 1.2 m above the table on the actor's side.
-fn cli_camera() -> Camera {
+fn cli_camera() -> SceneCamera {
     camera(
         Vector3::new(0.3, -1.6, TABLE_HEIGHT + 1.2),
         Vector3::new(0.0, 0.0, TABLE_HEIGHT),

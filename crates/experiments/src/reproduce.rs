@@ -26,7 +26,7 @@ use actrack::mocap::trial::{Importer, median};
 use actrack::model::ActionModel;
 use actrack::pipeline::{draw_overlay, track_row};
 use actrack::scene::{
-    ArmGeometry, Camera, EdgeSettings, Placement, Scene, Side, TableRegion, look_at, render_arm,
+    ArmSettings, SceneCamera, EdgeSettings, Placement, Scene, Side, SceneTable, look_at, render_arm,
 };
 use actrack::session::{PoseReport, Session};
 use actrack::style::{Style, StyledVideo, video_cups};
@@ -159,7 +159,7 @@ pub fn theta_region(model: &ActionModel) -> ([f64; 2], [f64; 2]) {
     (centre, half)
 }
 
-fn camera(name: &str, eye: [f64; 3], target: [f64; 3]) -> Result<Camera> {
+fn camera(name: &str, eye: [f64; 3], target: [f64; 3]) -> Result<SceneCamera> {
     let o = Vector3::from(SHOULDER);
     let pose = look_at(
         Vector3::from(eye) + o,
@@ -169,7 +169,7 @@ fn camera(name: &str, eye: [f64; 3], target: [f64; 3]) -> Result<Camera> {
     .ok_or_else(|| Error::Config("camera: degenerate look-at".into()))?;
     let (w, h) = FRAME_SIZE;
     let f = f64::from(w) / 2.0 / (HFOV_DEG.to_radians() / 2.0).tan();
-    Ok(Camera::centred(name, (w, h), f, pose))
+    Ok(SceneCamera::centred(name, (w, h), f, pose))
 }
 
 /// The scene of a subject: `views` cameras (1 or 2), the table around the model's θ region with
@@ -189,7 +189,7 @@ pub fn scene_for(
     let o = Vector3::from(SHOULDER);
     Ok(Scene {
         cameras,
-        table: TableRegion {
+        table: SceneTable {
             placement: Placement {
                 origin: Vector3::new(o.x + c[0], o.y + c[1], o.z + table_z),
                 yaw: 0.0,
@@ -201,10 +201,10 @@ pub fn scene_for(
             yaw: 0.0,
         },
         side: Side::Right,
-        arm: ArmGeometry {
+        arm: ArmSettings {
             upper_arm_length: Some(lengths[0]),
             lower_arm_length: Some(lengths[1]),
-            ..ArmGeometry::default()
+            ..ArmSettings::default()
         },
         edges: EdgeSettings::default(),
     })
