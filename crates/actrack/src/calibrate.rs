@@ -20,7 +20,7 @@ use image::{Rgb, RgbImage};
 use nalgebra::{Matrix3, Matrix6, Rotation3, Vector3, Vector6};
 
 use crate::error::{Error, Result};
-use crate::scene::{ArmSettings, SceneCamera, EdgeSettings, Placement, Scene, Side, SceneTable};
+use crate::scene::{ArmSettings, EdgeSettings, Placement, Scene, SceneCamera, SceneTable, Side};
 
 /// Camera intrinsics: focal lengths and principal point in pixels, OpenCV's Brown distortion.
 #[derive(Clone, Debug, PartialEq)]
@@ -158,7 +158,13 @@ impl Intrinsics {
         })
     }
 
-    fn camera(&self, width: u32, height: u32, r_cw: Matrix3<f64>, t_cw: Vector3<f64>) -> SceneCamera {
+    fn camera(
+        &self,
+        width: u32,
+        height: u32,
+        r_cw: Matrix3<f64>,
+        t_cw: Vector3<f64>,
+    ) -> SceneCamera {
         SceneCamera::new(
             "camera0",
             (width, height),
@@ -782,7 +788,13 @@ fn put(img: &mut RgbImage, u: f64, v: f64, c: [u8; 3]) {
 }
 
 /// Draws the world segment a–b, projected point by point (so distortion bends it).
-fn world_line(img: &mut RgbImage, cam: &SceneCamera, a: &Vector3<f64>, b: &Vector3<f64>, c: [u8; 3]) {
+fn world_line(
+    img: &mut RgbImage,
+    cam: &SceneCamera,
+    a: &Vector3<f64>,
+    b: &Vector3<f64>,
+    c: [u8; 3],
+) {
     let (Some(pa), Some(pb)) = (cam.project(a), cam.project(b)) else {
         return;
     };

@@ -20,7 +20,7 @@ use crate::frames::{FrameOptions, FrameSource};
 use crate::model::{Action, ActionModel, ArmLengths, Provenance, THETA_FRAME};
 use crate::motion::{ACTIONS, demonstrations};
 use crate::pipeline::{TrackOutputs, TrackSummary, track};
-use crate::scene::{SceneCamera, Scene, default_scene, look_at};
+use crate::scene::{Scene, SceneCamera, default_scene, look_at};
 use crate::synth::{
     MotionSource, motion_params, random_targets, render_frames, save_frames, sequence,
 };

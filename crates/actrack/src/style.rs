@@ -16,7 +16,7 @@ use rand_pcg::Pcg64Mcg;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
-use crate::scene::{SceneCamera, Scene, look_at};
+use crate::scene::{Scene, SceneCamera, look_at};
 use crate::synth::scene_synth;
 
 /// Where the camera is, in the actor's frame, and what it is.

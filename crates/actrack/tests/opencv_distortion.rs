@@ -9,7 +9,7 @@
 
 use std::path::Path;
 
-use actrack::scene::{SceneCamera, Scene};
+use actrack::scene::{Scene, SceneCamera};
 use nalgebra::{Matrix3, Rotation3, Vector3};
 use serde_json::Value;
 

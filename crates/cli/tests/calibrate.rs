@@ -8,7 +8,7 @@ use std::path::Path;
 use std::process::Command;
 
 use actrack::calibrate::{CalibrationInput, Intrinsics, ShoulderHeight, calibrate};
-use actrack::scene::{SceneCamera, EdgeSettings, Placement, Side, SceneTable, look_at};
+use actrack::scene::{EdgeSettings, Placement, SceneCamera, SceneTable, Side, look_at};
 use nalgebra::Vector3;
 use rand::{Rng, SeedableRng};
 
@@ -39,7 +39,12 @@ fn camera(eye: Vector3<f64>, target: Vector3<f64>, f: f64, distortion: [f64; 5])
     c
 }
 
-fn input(cam: &SceneCamera, corners: Vec<[f64; 2]>, shoulder: [f64; 2], above: f64) -> CalibrationInput {
+fn input(
+    cam: &SceneCamera,
+    corners: Vec<[f64; 2]>,
+    shoulder: [f64; 2],
+    above: f64,
+) -> CalibrationInput {
     CalibrationInput {
         width: cam.model.width,
         height: cam.model.height,

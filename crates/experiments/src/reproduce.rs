@@ -26,7 +26,7 @@ use actrack::mocap::trial::{Importer, median};
 use actrack::model::ActionModel;
 use actrack::pipeline::{draw_overlay, track_row};
 use actrack::scene::{
-    ArmSettings, SceneCamera, EdgeSettings, Placement, Scene, Side, SceneTable, look_at, render_arm,
+    ArmSettings, EdgeSettings, Placement, Scene, SceneCamera, SceneTable, Side, look_at, render_arm,
 };
 use actrack::session::{PoseReport, Session};
 use actrack::style::{Style, StyledVideo, video_cups};
