@@ -7,7 +7,9 @@
 //! G' = G · (floor + (1 − floor) · mask). The background is causal: the first frame, then after
 //! each frame's step B ← B + rate · (I − B) at every pixel farther than `margin` pixels from the
 //! tracked arm's silhouette, so the arm is not learnt as background while the track follows it
-//! (a cup held at the mouth stays foreground).
+//! (a cup held at the mouth stays foreground). When the edge image is computed in a region only
+//! (`observation.edge_region`), the gate works in that region, which is blended every frame; the
+//! rest of the background is blended one row in [`SWEEP`] per frame at the compounded rate.
 
 use actrack_render::{ArmGeometry, Camera, DilateScratch, EdgeImage, ImageView, PixelRect};
 
@@ -75,6 +77,7 @@ impl ForegroundGate {
         }
         let (rw, rh) = (rect.width(), rect.height());
         if self.background.len() != w as usize * h as usize
+            || rect.is_empty()
             || !PixelRect::full(w, h).contains(&rect)
             || pixels.size() != (rw, rh)
             || (g.width(), g.height()) != (rw, rh)
@@ -265,6 +268,63 @@ mod tests {
         let mut b = vec![0.0, 0.0, 10.0];
         blend(&mut b, &[10.0, 10.0, 20.0], &[0, 1, 0], 0.5);
         assert_eq!(b, vec![5.0, 0.0, 15.0]);
+    }
+
+    #[test]
+    fn a_region_and_its_sweep_learn_a_static_background_alike() {
+        let cfg = GateConfig::default();
+        let (w, h) = (8u32, 8u32);
+        let first = vec![50u8; (w * h * 3) as usize];
+        let second = vec![90u8; (w * h * 3) as usize];
+        let rect = PixelRect {
+            x0: 2,
+            y0: 3,
+            x1: 5,
+            y1: 6,
+        };
+        let (cam, geom) = (
+            Camera::look_at(
+                nalgebra::Vector3::new(0.0, -2.0, 1.0),
+                nalgebra::Vector3::zeros(),
+                nalgebra::Vector3::z(),
+                w,
+                h,
+                1.0,
+            )
+            .unwrap(),
+            ArmGeometry::default(),
+        );
+        let mut gate = ForegroundGate::default();
+        fn view(d: &[u8]) -> ImageView<'_> {
+            ImageView::rgb8(d, 8, 8).unwrap()
+        }
+        gate.update_region(&cfg, view(&first), rect, &cam, &geom, &[])
+            .unwrap();
+        // Every pixel starts from the first frame; after SWEEP frames of the second, every
+        // pixel has moved by 1 − (1 − rate)^SWEEP of the difference, in the region frame by
+        // frame, elsewhere in one step.
+        let start = gate.background().unwrap().to_vec();
+        for _ in 0..SWEEP {
+            gate.update_region(&cfg, view(&second), rect, &cam, &geom, &[])
+                .unwrap();
+        }
+        let want = 1.0 - (1.0 - cfg.rate).powi(SWEEP as i32);
+        for (i, (&b, &s)) in gate.background().unwrap().iter().zip(&start).enumerate() {
+            let moved = (b - s) / (90.0 - s);
+            assert!((moved - want).abs() < 1e-4, "pixel {i}: {moved} vs {want}");
+        }
+        // An empty region is refused, not a panic.
+        let mut g = EdgeImage::default();
+        assert!(
+            gate.apply_region(
+                &cfg,
+                view(&first),
+                PixelRect::default(),
+                view(&first),
+                &mut g
+            )
+            .is_err()
+        );
     }
 
     #[test]

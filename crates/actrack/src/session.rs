@@ -310,7 +310,7 @@ impl Session {
     }
 
     /// The edge images of the last step, one per view, at the size the observation works on
-    /// (see `observation.max_width`).
+    /// (see `observation.max_width`); 0 outside [`Session::edge_region`].
     pub fn edges(&self) -> &[EdgeImage] {
         &self.edges
     }
