@@ -270,6 +270,10 @@ mod tests {
         assert_eq!(b, vec![5.0, 0.0, 15.0]);
     }
 
+    fn view(d: &[u8]) -> ImageView<'_> {
+        ImageView::rgb8(d, 8, 8).unwrap()
+    }
+
     #[test]
     fn a_region_and_its_sweep_learn_a_static_background_alike() {
         let cfg = GateConfig::default();
@@ -295,9 +299,6 @@ mod tests {
             ArmGeometry::default(),
         );
         let mut gate = ForegroundGate::default();
-        fn view(d: &[u8]) -> ImageView<'_> {
-            ImageView::rgb8(d, 8, 8).unwrap()
-        }
         gate.update_region(&cfg, view(&first), rect, &cam, &geom, &[])
             .unwrap();
         // Every pixel starts from the first frame; after SWEEP frames of the second, every
