@@ -43,27 +43,15 @@ impl ForegroundGate {
         (!self.background.is_empty()).then_some(self.background.as_slice())
     }
 
-    /// Gates `g`, the edge image of `view`: starts the background from `view` on the first
-    /// frame, then G ← G · (floor + (1 − floor) · mask).
+    /// Gates `g`, the edge image of the pixels `rect` of `view` (`pixels` holds them, see
+    /// `actrack_render::crop`; the whole frame: `rect` = the frame, `pixels` = `view`): starts
+    /// the background from `view` on the first frame, then G ← G · (floor + (1 − floor) · mask)
+    /// with the mask found inside `rect`.
     ///
     /// # Errors
-    /// When `view`, the background and `g` differ in size.
+    /// When `view` and the background differ in size, or `rect` is empty or `rect`, `pixels`
+    /// and `g` do not fit.
     pub fn apply(
-        &mut self,
-        cfg: &GateConfig,
-        view: ImageView<'_>,
-        g: &mut EdgeImage,
-    ) -> Result<()> {
-        let (w, h) = view.size();
-        self.apply_region(cfg, view, PixelRect::full(w, h), view, g)
-    }
-
-    /// [`apply`](Self::apply) to the edge image `g` of the pixels `rect` of `view`; `pixels`
-    /// holds them (`actrack_render::crop`). The mask is found inside `rect` only.
-    ///
-    /// # Errors
-    /// When `view` and the background differ in size, or `rect`, `pixels` and `g` do not fit.
-    pub fn apply_region(
         &mut self,
         cfg: &GateConfig,
         view: ImageView<'_>,
@@ -119,32 +107,16 @@ impl ForegroundGate {
     }
 
     /// After a frame's step: blends `view` into the background at `cfg.rate` away from the
-    /// silhouettes of the `tracked` poses (world) grown by `cfg.margin` pixels. `view` is the
-    /// frame last given to [`apply`](Self::apply), if any (its grey values are reused).
-    ///
-    /// # Errors
-    /// When `view` and the background differ in size.
-    pub fn update(
-        &mut self,
-        cfg: &GateConfig,
-        view: ImageView<'_>,
-        camera: &Camera,
-        geometry: &ArmGeometry,
-        tracked: &[&[f64; 9]],
-    ) -> Result<()> {
-        let (w, h) = view.size();
-        self.update_region(cfg, view, PixelRect::full(w, h), camera, geometry, tracked)
-    }
-
-    /// [`update`](Self::update) where the gate was applied to the pixels `rect` of `view`
-    /// ([`apply_region`](Self::apply_region)): those pixels are blended every frame (their grey
-    /// values reused), the others, which the gate did not read, one row in [`SWEEP`] per frame
-    /// in turn at the rate that compounds to `SWEEP` frames, 1 − (1 − rate)^SWEEP. A static
-    /// background is learnt as fast as by blending every pixel every frame.
+    /// silhouettes of the `tracked` poses (world) grown by `cfg.margin` pixels. `rect` is the
+    /// region [`apply`](Self::apply) gated (the whole frame when it gated all of it): its
+    /// pixels are blended every frame, with the grey values `apply` found for this frame; the
+    /// others, which the gate did not read, one row in [`SWEEP`] per frame in turn at the rate
+    /// that compounds to `SWEEP` frames, 1 − (1 − rate)^SWEEP, so a static background is learnt
+    /// as fast as by blending every pixel every frame.
     ///
     /// # Errors
     /// When `view` and the background differ in size or `rect` does not lie in the frame.
-    pub fn update_region(
+    pub fn update(
         &mut self,
         cfg: &GateConfig,
         view: ImageView<'_>,
@@ -299,14 +271,14 @@ mod tests {
             ArmGeometry::default(),
         );
         let mut gate = ForegroundGate::default();
-        gate.update_region(&cfg, view(&first), rect, &cam, &geom, &[])
+        gate.update(&cfg, view(&first), rect, &cam, &geom, &[])
             .unwrap();
         // Every pixel starts from the first frame; after SWEEP frames of the second, every
         // pixel has moved by 1 − (1 − rate)^SWEEP of the difference, in the region frame by
         // frame, elsewhere in one step.
         let start = gate.background().unwrap().to_vec();
         for _ in 0..SWEEP {
-            gate.update_region(&cfg, view(&second), rect, &cam, &geom, &[])
+            gate.update(&cfg, view(&second), rect, &cam, &geom, &[])
                 .unwrap();
         }
         let want = 1.0 - (1.0 - cfg.rate).powi(SWEEP as i32);
@@ -317,7 +289,7 @@ mod tests {
         // An empty region is refused, not a panic.
         let mut g = EdgeImage::default();
         assert!(
-            gate.apply_region(
+            gate.apply(
                 &cfg,
                 view(&first),
                 PixelRect::default(),
@@ -340,13 +312,14 @@ mod tests {
         second[0..3].copy_from_slice(&[200, 200, 200]);
         let mut gate = ForegroundGate::default();
         let mut g = EdgeImage::from_vec(w, h, vec![1.0; 4]).unwrap();
-        gate.apply(&cfg, ImageView::rgb8(&first, w, h).unwrap(), &mut g)
-            .unwrap();
+        let all = PixelRect::full(w, h);
+        let view = ImageView::rgb8(&first, w, h).unwrap();
+        gate.apply(&cfg, view, all, view, &mut g).unwrap();
         // Nothing moved against the first frame: every pixel is damped to the floor.
         assert!(g.data().iter().all(|&x| (x - cfg.floor).abs() < 1e-6));
         let mut g = EdgeImage::from_vec(w, h, vec![1.0; 4]).unwrap();
-        gate.apply(&cfg, ImageView::rgb8(&second, w, h).unwrap(), &mut g)
-            .unwrap();
+        let view = ImageView::rgb8(&second, w, h).unwrap();
+        gate.apply(&cfg, view, all, view, &mut g).unwrap();
         assert!((g.data()[0] - 1.0).abs() < 1e-6);
         assert!((g.data()[1] - cfg.floor).abs() < 1e-6);
     }

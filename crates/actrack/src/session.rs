@@ -374,14 +374,11 @@ impl Session {
         let regions = self.edge_regions();
         let mut gate_ms = 0.0;
         for (v, img) in images.iter().enumerate() {
+            let cam = &self.scene.cameras[v];
             let stage = &mut self.views[v];
             if stage.factor > 1 {
                 actrack_render::downscale(*img, stage.factor, &mut stage.shrink).map_err(err)?;
             }
-        }
-        for (v, img) in images.iter().enumerate() {
-            let cam = &self.scene.cameras[v];
-            let stage = &mut self.views[v];
             let full = self.scene.edge_params(cam.model.width);
             let params = actrack_render::EdgeParams {
                 colour: self.config.observation.gradient == Gradient::Colour,
@@ -420,7 +417,7 @@ impl Session {
                 let (w, h) = img.size();
                 stage
                     .gate
-                    .update_region(
+                    .update(
                         gate,
                         img,
                         stage.gated.unwrap_or(PixelRect::full(w, h)),
@@ -572,7 +569,7 @@ fn view_edges(
     if obs_cfg.foreground_gate.enabled {
         let t = Instant::now();
         let rect = region.map_or(PixelRect::full(w, h), |(_, r)| r);
-        gate.apply_region(&obs_cfg.foreground_gate, img, rect, pixels, target)?;
+        gate.apply(&obs_cfg.foreground_gate, img, rect, pixels, target)?;
         *gate_ms += t.elapsed().as_secs_f64() * 1e3;
     }
     *kept = match region {
