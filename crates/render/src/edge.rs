@@ -165,8 +165,13 @@ struct WorkerScratch {
     dv: Vec<f32>,
     tmp: Vec<f32>,
     pad: Vec<f32>,
-    /// One row of a colour channel's magnitude (colour gradients).
-    chan_mag: Vec<f32>,
+    /// The ring of three RGB rows of the colour gradient, as integer planes.
+    rgb: Vec<i16>,
+    /// Per channel, the vertical sums and differences of the colour gradient's row.
+    isv: Vec<i16>,
+    idv: Vec<i16>,
+    /// The largest squared channel magnitude of the row.
+    m2: Vec<i32>,
 }
 
 /// Fewest rows per band of the Sobel pass when the edge image is split over threads (its halo
@@ -630,23 +635,106 @@ impl pulp::WithSimd for SobelBand<'_, '_> {
             mag,
             colour,
         } = self;
-        if colour && matches!(frame, ImageView::Rgb8 { .. }) {
-            let mut m = 0.0;
-            for c in 0..3 {
-                m = sobel_rows(s, frame, y0, h, mag, c > 0, |f, y, _, dst| {
-                    channel_row(f, y, c, dst);
-                });
+        match *frame {
+            ImageView::Rgb8 { data, width, .. } if colour => {
+                sobel_rgb_rows(s, data, width as usize, y0, h, mag)
             }
-            m
-        } else {
-            sobel_rows(s, frame, y0, h, mag, false, grey_row)
+            _ => sobel_rows(s, frame, y0, h, mag),
         }
     }
 }
 
-/// The body of [`SobelBand`]: the Sobel magnitude of the rows that `fill` converts (a frame's
-/// grey rows or one channel's), written into `mag`, or with `keep_max` merged into it as the
-/// larger of the two; returns max(mag).
+/// The colour body of [`SobelBand`]: per pixel the largest Sobel magnitude of R, G and B of
+/// the RGB rows `data` (`w` pixels wide) into `mag`; returns max(mag). One pass over the band
+/// in integers: the channel values and Sobel sums (|gx|, |gy| ≤ 1020) in i16, the squared
+/// magnitude gx² + gy² ≤ 2·1020² in i32. Each is an integer below 2²⁴, so it is exactly what
+/// the f32 arithmetic of [`sobel_rows`] gives on each channel. The largest of the three squares is taken before the one square root, which is
+/// the largest of the three roots (the root is monotone and correctly rounded): G is bit for
+/// bit that of the channel-by-channel computation, for a third of its square roots and none of
+/// its conversions to f32 but the last.
+// Inlined into the dispatched function (see `EdgeWorkspace::compute`).
+#[allow(clippy::inline_always)]
+#[inline(always)]
+fn sobel_rgb_rows(
+    s: &mut WorkerScratch,
+    data: &[u8],
+    w: usize,
+    y0: usize,
+    h: usize,
+    mag: &mut [f32],
+) -> f32 {
+    // Ring of three rows, each as three planes R, G, B: `rgb[(slot·3 + c)·w + x]`.
+    s.rgb.resize(9 * w, 0);
+    s.isv.resize(3 * w, 0);
+    s.idv.resize(3 * w, 0);
+    s.m2.resize(w, 0);
+    let mut slot_row = [usize::MAX; 3];
+    let mut lanes = [0f32; 8];
+    for y in y0..y0 + mag.len() / w {
+        let ys = [y.saturating_sub(1), y, (y + 1).min(h - 1)];
+        for &yy in &ys {
+            let slot = yy % 3;
+            if slot_row[slot] != yy {
+                let planes = &mut s.rgb[slot * 3 * w..][..3 * w];
+                let (r, rest) = planes.split_at_mut(w);
+                let (g, b) = rest.split_at_mut(w);
+                let (px, _) = data[3 * yy * w..3 * (yy + 1) * w].as_chunks::<3>();
+                for (((r, g), b), px) in r.iter_mut().zip(g.iter_mut()).zip(b.iter_mut()).zip(px) {
+                    *r = i16::from(px[0]);
+                    *g = i16::from(px[1]);
+                    *b = i16::from(px[2]);
+                }
+                slot_row[slot] = yy;
+            }
+        }
+        for c in 0..3 {
+            let plane = |yy: usize| &s.rgb[((yy % 3) * 3 + c) * w..][..w];
+            let (a, m, b) = (plane(ys[0]), plane(ys[1]), plane(ys[2]));
+            let sv = &mut s.isv[c * w..][..w];
+            let dv = &mut s.idv[c * w..][..w];
+            for x in 0..w {
+                sv[x] = a[x] + 2 * m[x] + b[x];
+                dv[x] = b[x] - a[x];
+            }
+        }
+        let m2 = &mut s.m2[..w];
+        for c in 0..3 {
+            let (sv, dv) = (&s.isv[c * w..][..w], &s.idv[c * w..][..w]);
+            let at = |x_l: usize, x: usize, x_r: usize| {
+                let gx = i32::from(sv[x_r] - sv[x_l]);
+                let gy = i32::from(dv[x_l] + 2 * dv[x] + dv[x_r]);
+                gx * gx + gy * gy
+            };
+            let merge = |old: i32, v: i32| if c == 0 || v > old { v } else { old };
+            if w >= 3 {
+                let n = w - 2;
+                let (sl, sr) = (&sv[..n], &sv[2..2 + n]);
+                let (dl, dc, dr) = (&dv[..n], &dv[1..=n], &dv[2..2 + n]);
+                let o = &mut m2[1..=n];
+                for x in 0..n {
+                    let gx = i32::from(sr[x] - sl[x]);
+                    let gy = i32::from(dl[x] + 2 * dc[x] + dr[x]);
+                    o[x] = merge(o[x], gx * gx + gy * gy);
+                }
+            }
+            m2[0] = merge(m2[0], at(0, 0, 1.min(w - 1)));
+            if w > 1 {
+                m2[w - 1] = merge(m2[w - 1], at(w - 2, w - 1, w - 1));
+            }
+        }
+        let out = &mut mag[(y - y0) * w..][..w];
+        #[allow(clippy::cast_precision_loss)] // below 2²⁴: exact
+        for (o, &v) in out.iter_mut().zip(m2.iter()) {
+            *o = (v as f32).sqrt();
+        }
+        let m = max_value(out);
+        lanes[y % 8] = if m > lanes[y % 8] { m } else { lanes[y % 8] };
+    }
+    max_value(&lanes)
+}
+
+/// The grey body of [`SobelBand`]: the Sobel magnitude of the frame's grey rows into `mag`;
+/// returns max(mag).
 // `hypot` does not vectorise; |g| ≤ 255·2, so the plain form cannot overflow. Inlined into the
 // dispatched function (see `EdgeWorkspace::compute`).
 #[allow(clippy::imprecise_flops, clippy::inline_always)]
@@ -657,8 +745,6 @@ fn sobel_rows(
     y0: usize,
     h: usize,
     mag: &mut [f32],
-    keep_max: bool,
-    fill: impl Fn(&ImageView<'_>, usize, &mut Vec<f32>, &mut [f32]),
 ) -> f32 {
     let w = frame.size().0 as usize;
     s.sv.resize(w, 0.0);
@@ -670,7 +756,7 @@ fn sobel_rows(
         let ys = [y.saturating_sub(1), y, (y + 1).min(h - 1)];
         for &yy in &ys {
             if slot_row[yy % 3] != yy {
-                fill(frame, yy, &mut s.chan, &mut s.grey[(yy % 3) * w..][..w]);
+                grey_row(frame, yy, &mut s.chan, &mut s.grey[(yy % 3) * w..][..w]);
                 slot_row[yy % 3] = yy;
             }
         }
@@ -684,13 +770,7 @@ fn sobel_rows(
                 dvr[x] = b[x] - a[x];
             }
         }
-        s.chan_mag.resize(w, 0.0);
-        let merged = &mut mag[(y - y0) * w..][..w];
-        let out = if keep_max {
-            &mut s.chan_mag[..w]
-        } else {
-            &mut *merged
-        };
+        let out = &mut mag[(y - y0) * w..][..w];
         let (sv, dv) = (&s.sv[..w], &s.dv[..w]);
         let at = |x_l: usize, x: usize, x_r: usize| {
             let gx = sv[x_r] - sv[x_l];
@@ -712,12 +792,7 @@ fn sobel_rows(
         if w > 1 {
             out[w - 1] = at(w - 2, w - 1, w - 1);
         }
-        if keep_max {
-            for (m, &c) in merged.iter_mut().zip(&s.chan_mag[..w]) {
-                *m = if c > *m { c } else { *m };
-            }
-        }
-        let m = max_value(merged);
+        let m = max_value(out);
         lanes[y % 8] = if m > lanes[y % 8] { m } else { lanes[y % 8] };
     }
     max_value(&lanes)
@@ -942,23 +1017,6 @@ fn grey_row(frame: &ImageView<'_>, y: usize, chan: &mut Vec<f32>, dst: &mut [f32
                 *g = if p.is_finite() { p } else { 0.0 };
             }
         }
-    }
-}
-
-/// Channel `c` (0 = R, 1 = G, 2 = B) of an RGB row as f32 (a grey frame's row as it is).
-// Inlined into the dispatched `compute_kernels` (see there).
-#[allow(clippy::inline_always)]
-#[inline(always)]
-fn channel_row(frame: &ImageView<'_>, y: usize, c: usize, dst: &mut [f32]) {
-    let w = dst.len();
-    match *frame {
-        ImageView::Rgb8 { data, .. } => {
-            let (px, _) = data[3 * y * w..3 * (y + 1) * w].as_chunks::<3>();
-            for (g, px) in dst.iter_mut().zip(px) {
-                *g = f32::from(px[c]);
-            }
-        }
-        _ => grey_row(frame, y, &mut Vec::new(), dst),
     }
 }
 

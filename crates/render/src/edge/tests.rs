@@ -519,3 +519,49 @@ fn grey_image_equals_the_rows_of_the_edge_stage() {
         assert_eq!(&got[y * w..(y + 1) * w], &row[..], "row {y}");
     }
 }
+
+/// The integer colour Sobel gives, bit for bit, the channel-by-channel f32 computation: the
+/// grey kernel on each channel as a grey frame, the largest of the three magnitudes kept; for
+/// every band split, in the dispatched and the baseline variant.
+#[test]
+fn colour_sobel_equals_the_largest_channel_magnitude() {
+    for &(w, h) in &[(45usize, 37usize), (67, 9), (2, 3), (1, 4), (3, 1)] {
+        let rgb = test_frame(w, h);
+        let frame = ImageView::rgb8(&rgb, w as u32, h as u32).unwrap();
+        let sobel = |frame: &ImageView<'_>, colour: bool, isa: Isa, y0: usize, y1: usize| {
+            let mut s = WorkerScratch::default();
+            let mut mag = vec![0f32; (y1 - y0) * w];
+            let m = isa.run(SobelBand {
+                s: &mut s,
+                frame,
+                y0,
+                h,
+                mag: &mut mag,
+                colour,
+            });
+            (mag, m)
+        };
+        let mut want = vec![0f32; w * h];
+        for c in 0..3 {
+            let chan: Vec<u8> = rgb.chunks_exact(3).map(|px| px[c]).collect();
+            let grey = ImageView::grey8(&chan, w as u32, h as u32).unwrap();
+            let (mag, _) = sobel(&grey, false, Isa::Scalar, 0, h);
+            for (m, v) in want.iter_mut().zip(mag) {
+                *m = m.max(v);
+            }
+        }
+        for isa in [Isa::Scalar, Isa::Dispatch(pulp::Arch::new())] {
+            for bands in [1, 2, 3] {
+                let rows = h.div_ceil(bands);
+                for y0 in (0..h).step_by(rows) {
+                    let y1 = (y0 + rows).min(h);
+                    let (mag, m) = sobel(&frame, true, isa, y0, y1);
+                    let part = &want[y0 * w..y1 * w];
+                    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                    assert_eq!(bits(&mag), bits(part), "{w}×{h} rows {y0}..{y1}");
+                    assert_eq!(m.to_bits(), max_value(part).to_bits());
+                }
+            }
+        }
+    }
+}
