@@ -21,7 +21,6 @@ use crate::error::{Error, Result};
 #[derive(Debug, Default)]
 pub struct ForegroundGate {
     background: Vec<f32>,
-    chan: Vec<f32>,
     /// The grey values of the region `apply` gated last, for `update` of the same frame.
     grey: Vec<f32>,
     /// The region whose grey values `grey` holds, when they are of the frame `update` is
@@ -33,6 +32,8 @@ pub struct ForegroundGate {
     sweep: usize,
     foreground: Vec<u8>,
     covered: Vec<u8>,
+    /// The rectangle of `covered`'s set pixels.
+    set: PixelRect,
     dilate: DilateScratch,
     mask: Vec<u8>,
 }
@@ -61,7 +62,7 @@ impl ForegroundGate {
     ) -> Result<()> {
         let (w, h) = view.size();
         if self.background.is_empty() {
-            actrack_render::grey_image(view, &mut self.chan, &mut self.background);
+            actrack_render::grey_image(view, &mut self.background);
         }
         let (rw, rh) = (rect.width(), rect.height());
         if self.background.len() != w as usize * h as usize
@@ -75,17 +76,17 @@ impl ForegroundGate {
                 self.background.len()
             )));
         }
-        actrack_render::grey_image(pixels, &mut self.chan, &mut self.grey);
+        actrack_render::grey_image(pixels, &mut self.grey);
         self.fresh = Some(rect);
-        self.foreground.clear();
+        self.foreground.resize(self.grey.len(), 0);
         let (x0, x1) = (rect.x0 as usize, rect.x1 as usize);
-        for (y, grey) in (rect.y0 as usize..).zip(self.grey.chunks_exact(rw as usize)) {
+        let rows = self.grey.chunks_exact(rw as usize);
+        let fg = self.foreground.chunks_exact_mut(rw as usize);
+        for ((y, grey), fg) in (rect.y0 as usize..).zip(rows).zip(fg) {
             let back = &self.background[y * w as usize + x0..y * w as usize + x1];
-            self.foreground.extend(
-                grey.iter()
-                    .zip(back)
-                    .map(|(&i, &b)| u8::from((i - b).abs() > cfg.threshold)),
-            );
+            for ((f, &i), &b) in fg.iter_mut().zip(grey).zip(back) {
+                *f = u8::from((i - b).abs() > cfg.threshold);
+            }
         }
         actrack_render::dilate_mask(
             &self.foreground,
@@ -127,7 +128,7 @@ impl ForegroundGate {
     ) -> Result<()> {
         let (w, h) = view.size();
         if self.background.is_empty() {
-            actrack_render::grey_image(view, &mut self.chan, &mut self.background);
+            actrack_render::grey_image(view, &mut self.background);
         }
         let n = w as usize * h as usize;
         if self.background.len() != n || !PixelRect::full(w, h).contains(&rect) {
@@ -142,19 +143,31 @@ impl ForegroundGate {
             self.grey.clear();
             for y in rect.y0..rect.y1 {
                 let row = row_view(view, y, rect.x0, rect.x1)?;
-                actrack_render::grey_image(row, &mut self.chan, &mut self.row);
+                actrack_render::grey_image(row, &mut self.row);
                 self.grey.extend_from_slice(&self.row);
             }
         }
-        self.covered.clear();
-        self.covered.resize(n, 0);
+        // Only the pixels the last frame covered need clearing.
+        if self.covered.len() == n {
+            let c = self.set;
+            for y in c.y0 as usize..c.y1 as usize {
+                self.covered[y * w as usize + c.x0 as usize..y * w as usize + c.x1 as usize]
+                    .fill(0);
+            }
+        } else {
+            self.covered.clear();
+            self.covered.resize(n, 0);
+        }
+        self.set = PixelRect::default();
         for pose in tracked {
             if !pose.iter().all(|x| x.is_finite()) {
                 continue;
             }
             let parts = actrack_render::project_parts(camera, geometry, pose);
-            actrack_render::cover_parts(&parts, f64::from(cfg.margin), w, h, &mut self.covered)
-                .map_err(|e| Error::Config(format!("foreground gate: {e}")))?;
+            let set =
+                actrack_render::cover_parts(&parts, f64::from(cfg.margin), w, h, &mut self.covered)
+                    .map_err(|e| Error::Config(format!("foreground gate: {e}")))?;
+            self.set = self.set.union(&set);
         }
         let w = w as usize;
         let (x0, x1) = (rect.x0 as usize, rect.x1 as usize);
@@ -189,7 +202,7 @@ impl ForegroundGate {
                 }
                 #[allow(clippy::cast_possible_truncation)] // both are at most the width
                 let row = row_view(view, y as u32, a as u32, b as u32)?;
-                actrack_render::grey_image(row, &mut self.chan, &mut self.row);
+                actrack_render::grey_image(row, &mut self.row);
                 let at = y * w + a..y * w + b;
                 blend(
                     &mut self.background[at.clone()],

@@ -951,42 +951,46 @@ impl Threshold {
 }
 
 /// The grey image of SPEC §4.1 step 1, converted as [`EdgeWorkspace::compute`] converts it
-/// (0.299 R + 0.587 G + 0.114 B for colour frames), row-major into `out` (resized); `chan` is
-/// scratch.
-pub fn grey_image(frame: ImageView<'_>, chan: &mut Vec<f32>, out: &mut Vec<f32>) {
+/// (0.299 R + 0.587 G + 0.114 B for colour frames), row-major into `out` (resized).
+pub fn grey_image(frame: ImageView<'_>, out: &mut Vec<f32>) {
     let (w, h) = frame.size();
     let (w, h) = (w as usize, h as usize);
     out.clear();
+    out.resize(w * h, 0.0);
     if let ImageView::Rgb8 { data, .. } = frame {
-        // Each product is the f32 product `grey_row` forms, and the sums are in its order, so
-        // the values are bit-identical; three table reads beat the widening on one core.
-        let (px, _) = data[..3 * w * h].as_chunks::<3>();
-        out.extend(px.iter().map(|p| {
-            GREY_LUT[0][usize::from(p[0])]
-                + GREY_LUT[1][usize::from(p[1])]
-                + GREY_LUT[2][usize::from(p[2])]
-        }));
+        pulp::Arch::new().dispatch(GreyRgb {
+            data: &data[..3 * w * h],
+            out,
+        });
         return;
     }
-    out.resize(w * h, 0.0);
     for (y, row) in out.chunks_exact_mut(w).enumerate().take(h) {
-        grey_row(&frame, y, chan, row);
+        // Grey rows need no scratch (an empty `Vec` allocates nothing).
+        grey_row(&frame, y, &mut Vec::new(), row);
     }
 }
 
-/// The products 0.299·v, 0.587·v and 0.114·v of every byte v (f32, as `grey_row` forms them).
-static GREY_LUT: [[f32; 256]; 3] = {
-    let mut t = [[0.0; 256]; 3];
-    let mut v = 0;
-    while v < 256 {
-        let x = v as f32;
-        t[0][v] = 0.299 * x;
-        t[1][v] = 0.587 * x;
-        t[2][v] = 0.114 * x;
-        v += 1;
+/// The grey values of RGB pixels, `out[i] = 0.299 R + 0.587 G + 0.114 B` of pixel i, in the
+/// f32 operations of `grey_row` (bit-identical), compiled for the best instruction set the CPU
+/// has: the stride-3 loads vectorise with AVX2 or AVX-512.
+struct GreyRgb<'a> {
+    data: &'a [u8],
+    out: &'a mut [f32],
+}
+
+impl pulp::WithSimd for GreyRgb<'_> {
+    type Output = ();
+
+    // Inlined into the dispatched function.
+    #[allow(clippy::inline_always)]
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) {
+        let (px, _) = self.data.as_chunks::<3>();
+        for (g, p) in self.out.iter_mut().zip(px) {
+            *g = 0.299 * f32::from(p[0]) + 0.587 * f32::from(p[1]) + 0.114 * f32::from(p[2]);
+        }
     }
-    t
-};
+}
 
 /// One grey row (0.299 R + 0.587 G + 0.114 B for colour frames). Colour rows are first widened
 /// to f32 channel by channel into `chan` (contiguous, so it vectorises), then combined with a

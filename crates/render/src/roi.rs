@@ -70,6 +70,22 @@ impl PixelRect {
         }
     }
 
+    /// The smallest rectangle that holds both (an empty one adds nothing).
+    #[must_use]
+    pub fn union(&self, other: &Self) -> Self {
+        match (self.is_empty(), other.is_empty()) {
+            (true, true) => Self::default(),
+            (true, false) => *other,
+            (false, true) => *self,
+            (false, false) => Self {
+                x0: self.x0.min(other.x0),
+                y0: self.y0.min(other.y0),
+                x1: self.x1.max(other.x1),
+                y1: self.y1.max(other.y1),
+            },
+        }
+    }
+
     /// Whether `other` lies inside this rectangle.
     pub fn contains(&self, other: &Self) -> bool {
         other.is_empty()

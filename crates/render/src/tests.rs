@@ -195,7 +195,21 @@ fn cover_parts_matches_brute_force() {
         for cap in capsules {
             let (c0, c1, r0, r1) = cap;
             let mut mask = vec![0u8; (w * h) as usize];
-            cover_parts(&[Part2::Capsule { c0, c1, r0, r1 }], grow, w, h, &mut mask).unwrap();
+            let set =
+                cover_parts(&[Part2::Capsule { c0, c1, r0, r1 }], grow, w, h, &mut mask).unwrap();
+            // The returned rectangle is the bounding box of the set pixels.
+            let (mut lo, mut hi) = ([w, h], [0, 0]);
+            for (i, _) in mask.iter().enumerate().filter(|(_, m)| **m == 1) {
+                let (u, v) = (i as u32 % w, i as u32 / w);
+                (lo, hi) = (
+                    [lo[0].min(u), lo[1].min(v)],
+                    [hi[0].max(u + 1), hi[1].max(v + 1)],
+                );
+            }
+            assert_eq!(
+                [set.x0, set.y0, set.x1, set.y1],
+                [lo[0], lo[1], hi[0], hi[1]]
+            );
             for v in 0..h {
                 for u in 0..w {
                     let d = dist(cap, [f64::from(u), f64::from(v)]);
@@ -253,7 +267,11 @@ fn cover_parts_matches_brute_force() {
         r0,
         r1,
     };
-    cover_parts(&[nan], 1.0, w, h, &mut none).unwrap();
+    assert!(
+        cover_parts(&[nan], 1.0, w, h, &mut none)
+            .unwrap()
+            .is_empty()
+    );
     assert!(none.iter().all(|&x| x == 0));
 }
 

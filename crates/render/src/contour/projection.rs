@@ -5,7 +5,7 @@ use nalgebra::{Vector2, Vector3};
 use tiny_skia::{Mask, PathBuilder};
 
 use super::{MAX_COORD, Part2, Prepared};
-use crate::{ArmGeometry, Camera, RenderError, camera::NEAR_PLANE};
+use crate::{ArmGeometry, Camera, PixelRect, RenderError, camera::NEAR_PLANE};
 
 /// Per-thread scratch for rasterising silhouettes: a mask that only grows, and a reusable path
 /// builder. Reusing one per thread means no allocation per particle in our code (tiny-skia
@@ -270,7 +270,8 @@ pub(crate) fn part_polygon(part: &Part2, out: &mut Vec<[f64; 2]>) {
 /// within `grow` pixels of it: the union silhouette grown by `grow` (exact for discs and
 /// capsules; for an ellipse the inside is exact and the growth is measured along its minor
 /// axis, so it reaches less far along the major one). Other pixels are left as they are. A
-/// non-finite part or `grow` covers nothing.
+/// non-finite part or `grow` covers nothing. Returns the smallest rectangle that holds every
+/// pixel it set (empty when it set none), so that a caller can clear just that.
 ///
 /// # Errors
 /// [`RenderError::InvalidImage`] if `mask` does not hold `width · height` values.
@@ -280,7 +281,7 @@ pub fn cover_parts(
     width: u32,
     height: u32,
     mask: &mut [u8],
-) -> Result<(), RenderError> {
+) -> Result<PixelRect, RenderError> {
     let (w, h) = (width as usize, height as usize);
     if mask.len() != w * h {
         return Err(RenderError::InvalidImage(format!(
@@ -289,8 +290,9 @@ pub fn cover_parts(
             mask.len()
         )));
     }
+    let mut set = PixelRect::default();
     if !grow.is_finite() {
-        return Ok(());
+        return Ok(set);
     }
     for part in parts {
         let p = Prepared::new(part);
@@ -316,7 +318,15 @@ pub fn cover_parts(
             };
             let z = (a..=u1 as usize).rev().find(|&u| inside(u, v)).unwrap_or(a);
             row[a..=z].fill(1);
+            #[allow(clippy::cast_possible_truncation)] // within the image's u32 size
+            let run = PixelRect {
+                x0: a as u32,
+                y0: v as u32,
+                x1: z as u32 + 1,
+                y1: v as u32 + 1,
+            };
+            set = set.union(&run);
         }
     }
-    Ok(())
+    Ok(set)
 }
