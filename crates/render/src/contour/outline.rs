@@ -116,8 +116,9 @@ impl Prepared {
         }
     }
 
-    /// Signed distance (exact for discs and capsules, approximate for ellipses), negative
-    /// inside.
+    /// Signed distance, negative inside: exact for discs and capsules; for an ellipse
+    /// b·(ρ − 1), with ρ the ellipse's radial coordinate (exact along the b axis, a/b as far
+    /// along the a axis).
     pub(super) fn signed_distance(&self, x: Vector2<f64>) -> f64 {
         match *self {
             Self::Circle { c, r } => (x - c).norm() - r,
@@ -133,13 +134,16 @@ impl Prepared {
                 cos_a,
             } => {
                 let rel = x - c0;
-                let s = rel.dot(&d);
-                if s < r0 * sin_a {
+                let (s, t) = (rel.dot(&d), rel.dot(&n).abs());
+                // The outline's straight side touches each disc where the disc's normal
+                // (sin α, cos α) in (axis, across) coordinates does; the nearest point is on a
+                // cap behind the normal through its centre and on the side between them.
+                if s * cos_a < t * sin_a {
                     rel.norm() - r0
-                } else if s > len + r1 * sin_a {
+                } else if (s - len) * cos_a > t * sin_a {
                     (x - c1).norm() - r1
                 } else {
-                    s * sin_a + rel.dot(&n).abs() * cos_a - r0
+                    s * sin_a + t * cos_a - r0
                 }
             }
             Self::Ellipse { c, a, b, ea, eb } => {
@@ -150,6 +154,16 @@ impl Prepared {
                 let (xa, xb) = (rel.dot(&ea) / a, rel.dot(&eb) / b);
                 (xa.hypot(xb) - 1.0) * b
             }
+        }
+    }
+
+    /// A bound on how fast [`Self::signed_distance`] changes: |sd(x) − sd(y)| ≤ L·|x − y|. The
+    /// exact distances of discs and capsules have L = 1; the ellipse's b·(ρ − 1) has
+    /// L = b / min(a, b).
+    pub(super) fn lipschitz(&self) -> f64 {
+        match *self {
+            Self::Circle { .. } | Self::Capsule { .. } => 1.0,
+            Self::Ellipse { a, b, .. } => (b / a.min(b)).max(1.0),
         }
     }
 

@@ -268,8 +268,9 @@ pub(crate) fn part_polygon(part: &Part2, out: &mut Vec<[f64; 2]>) {
 
 /// Sets `mask[v · width + u] = 1` for every pixel whose centre (u, v) lies in one of `parts` or
 /// within `grow` pixels of it: the union silhouette grown by `grow` (exact for discs and
-/// capsules; for an ellipse the inside is exact and the growth is measured along its minor
-/// axis, so it reaches less far along the major one). Other pixels are left as they are. A
+/// capsules; an ellipse's inside is exact and its growth is `grow` along its b axis and a/b
+/// times that along its a axis, within its bounding box grown by `grow`). Other pixels are
+/// left as they are. A
 /// non-finite part or `grow` covers nothing. Returns the smallest rectangle that holds every
 /// pixel it set (empty when it set none), so that a caller can clear just that.
 ///
@@ -307,16 +308,36 @@ pub fn cover_parts(
             continue;
         }
         // A part grown by `grow` is convex, so it covers one run of every row: found from
-        // both ends, then filled.
-        let inside =
-            |u: usize, v: usize| p.signed_distance(Vector2::new(u as f64, v as f64)) <= grow;
-        let u0 = lo(b[0]);
+        // both ends, then filled. Each end is found by stepping over pixels that cannot be
+        // inside: the signed distance changes by at most L per pixel, so from a pixel `e` outside
+        // (e = sd − grow > 0) the next e / L pixels are outside too (shortened by a relative
+        // 1e-9 against rounding).
+        let lip = p.lipschitz();
+        let excess =
+            |u: usize, v: usize| p.signed_distance(Vector2::new(u as f64, v as f64)) - grow;
+        let skip = |e: f64| (e / lip * (1.0 - 1e-9)).ceil().max(1.0) as usize;
+        let (u0, u1) = (lo(b[0]), u1 as usize);
         for v in lo(b[1])..=v1 as usize {
             let row = &mut mask[v * w..(v + 1) * w];
-            let Some(a) = (u0..=u1 as usize).find(|&u| inside(u, v)) else {
+            let mut a = u0;
+            while a <= u1 {
+                let e = excess(a, v);
+                if e <= 0.0 {
+                    break;
+                }
+                a = a.saturating_add(skip(e));
+            }
+            if a > u1 {
                 continue;
-            };
-            let z = (a..=u1 as usize).rev().find(|&u| inside(u, v)).unwrap_or(a);
+            }
+            let mut z = u1;
+            while z > a {
+                let e = excess(z, v);
+                if e <= 0.0 {
+                    break;
+                }
+                z = z.saturating_sub(skip(e)).max(a);
+            }
             row[a..=z].fill(1);
             #[allow(clippy::cast_possible_truncation)] // within the image's u32 size
             let run = PixelRect {

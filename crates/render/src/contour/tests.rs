@@ -400,3 +400,81 @@ fn parts_outside_or_behind() {
         }
     }
 }
+
+/// `cover_parts` steps over pixels by the distance bound; it sets exactly the pixels of the
+/// part's bounding box grown by `grow` whose signed distance to the part is within `grow`, as
+/// a test of every pixel does, for discs, thin and thick capsules at any slope and ellipses
+/// with either axis the larger. The capsule's distance is the exact one (brute force over the
+/// discs it is the hull of).
+#[test]
+fn cover_parts_sets_exactly_the_pixels_within_the_growth() {
+    let (w, h) = (96u32, 72u32);
+    let mut seed = 11u64;
+    let mut uniform = |lo: f64, hi: f64| {
+        seed = seed
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        lo + (hi - lo) * ((seed >> 11) as f64 / (1u64 << 53) as f64)
+    };
+    for _ in 0..60 {
+        let part = if uniform(0.0, 1.0) < 0.6 {
+            Part2::Capsule {
+                c0: [uniform(-20.0, 110.0), uniform(-20.0, 90.0)],
+                c1: [uniform(-20.0, 110.0), uniform(-20.0, 90.0)],
+                r0: uniform(0.3, 12.0),
+                r1: uniform(0.3, 12.0),
+            }
+        } else {
+            Part2::Ellipse {
+                c: [uniform(0.0, 96.0), uniform(0.0, 72.0)],
+                a: uniform(0.5, 25.0),
+                b: uniform(0.5, 25.0),
+                angle: uniform(0.0, 6.3),
+            }
+        };
+        for grow in [0.0, 2.5, 8.0] {
+            let mut mask = vec![0u8; (w * h) as usize];
+            cover_parts(&[part], grow, w, h, &mut mask).unwrap();
+            let p = Prepared::new(&part);
+            let b = p.bbox();
+            for v in 0..h {
+                for u in 0..w {
+                    let x = [f64::from(u), f64::from(v)];
+                    let sd = p.signed_distance(Vector2::from(x));
+                    let boxed = b[0] - grow <= x[0]
+                        && x[0] <= b[2] + grow
+                        && b[1] - grow <= x[1]
+                        && x[1] <= b[3] + grow;
+                    assert_eq!(
+                        mask[(v * w + u) as usize] == 1,
+                        boxed && sd <= grow,
+                        "({u}, {v}) {part:?} grow {grow}: sd {sd}"
+                    );
+                    if let Part2::Capsule { c0, c1, r0, r1 } = part
+                        && grow == 0.0
+                        && (u + v) % 3 == 0
+                    {
+                        let brute = (0..=1000)
+                            .map(|i| {
+                                let t = f64::from(i) / 1000.0;
+                                let c = [c0[0] + t * (c1[0] - c0[0]), c0[1] + t * (c1[1] - c0[1])];
+                                (x[0] - c[0]).hypot(x[1] - c[1]) - (r0 + t * (r1 - r0))
+                            })
+                            .fold(f64::INFINITY, f64::min);
+                        // Outside, the hull's distance is the discs' smallest; inside, the
+                        // discs' value is at least the (negative) distance.
+                        let tol = 0.05;
+                        if brute > 0.0 {
+                            assert!(
+                                (sd - brute).abs() < tol,
+                                "({u}, {v}) {part:?}: {sd} vs {brute}"
+                            );
+                        } else {
+                            assert!(sd <= brute + tol, "({u}, {v}) {part:?}: {sd} vs {brute}");
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
