@@ -174,7 +174,7 @@ impl ForegroundGate {
         if rw > 0 {
             for (y, grey) in (rect.y0 as usize..).zip(self.grey.chunks_exact(rw)) {
                 let at = y * w + x0..y * w + x1;
-                blend(
+                actrack_render::blend_grey(
                     &mut self.background[at.clone()],
                     grey,
                     &self.covered[at],
@@ -202,14 +202,14 @@ impl ForegroundGate {
                 }
                 #[allow(clippy::cast_possible_truncation)] // both are at most the width
                 let row = row_view(view, y as u32, a as u32, b as u32)?;
-                actrack_render::grey_image(row, &mut self.row);
                 let at = y * w + a..y * w + b;
-                blend(
+                actrack_render::blend_background(
                     &mut self.background[at.clone()],
-                    &self.row,
+                    row,
                     &self.covered[at],
                     rate,
-                );
+                )
+                .map_err(|e| Error::Config(format!("foreground gate: {e}")))?;
             }
         }
         Ok(())
@@ -236,24 +236,9 @@ fn row_view(view: ImageView<'_>, y: u32, x0: u32, x1: u32) -> Result<ImageView<'
     .map_err(|e| Error::Config(format!("foreground gate: {e}")))
 }
 
-/// B ← B + rate · (I − B) where `covered` is 0 (equal sizes). Without a branch, so that it
-/// vectorises: a covered pixel adds 0·rate·(I − B) = 0.
-pub fn blend(background: &mut [f32], grey: &[f32], covered: &[u8], rate: f32) {
-    for ((b, &g), &c) in background.iter_mut().zip(grey).zip(covered) {
-        *b += rate * (g - *b) * f32::from(u8::from(c == 0));
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn blend_skips_covered_pixels() {
-        let mut b = vec![0.0, 0.0, 10.0];
-        blend(&mut b, &[10.0, 10.0, 20.0], &[0, 1, 0], 0.5);
-        assert_eq!(b, vec![5.0, 0.0, 15.0]);
-    }
 
     fn view(d: &[u8]) -> ImageView<'_> {
         ImageView::rgb8(d, 8, 8).unwrap()

@@ -105,11 +105,13 @@ const SIDE_SAMPLES: usize = 16;
 /// not rendered); with none left the rectangle is empty. When a pose comes within the arm's
 /// largest radius of the camera's near plane the whole image is returned.
 ///
-/// The bound is conservative: every point of an arm lies within the largest radius or half-axis
-/// ρ of `geometry` from the segments p–q and q–r; perspective maps those segments into the
-/// convex hull of the projected joints, and a ball of radius ρ at depth z ≥ z_min, seen at most
-/// tan α off the axis, projects within ρ(1 + tan²α) / (√(z_min² − ρ²) − ρ tan α) of its centre
-/// (normalised units). With lens distortion the normalised rectangle's sides are sampled and
+/// The bound is conservative: every point of an arm lies within ρ, the largest cone radius or
+/// cross half-axis of the hand, of the convex hull of p, q, r and the two ends c ± a₀e₀ of the
+/// hand ellipsoid's long axis (a point of the ellipsoid lies within its largest cross
+/// half-axis of that axis; the cones lie within their radii of p–q and q–r). Perspective maps
+/// the hull into the convex hull of the projected vertices, and a ball of radius ρ at depth
+/// z ≥ z_min, seen at most tan α off the axis, projects within
+/// ρ(1 + tan²α) / (√(z_min² − ρ²) − ρ tan α) of its centre (normalised units). With lens distortion the normalised rectangle's sides are sampled and
 /// distorted, which bounds it for the monotonic distortions of calibrated lenses.
 pub fn arm_bounds(
     camera: &Camera,
@@ -122,7 +124,7 @@ pub fn arm_bounds(
         .upper_radii
         .iter()
         .chain(&geometry.forearm_radii)
-        .chain(&geometry.hand_half_axes)
+        .chain(&geometry.hand_half_axes[1..])
         .fold(0.0f64, |a, &b| a.max(b));
     let rot = camera.rotation_matrix();
     let t = camera.translation_vector();
@@ -130,11 +132,13 @@ pub fn arm_bounds(
     let mut z_min = f64::MAX;
     let mut any = false;
     for pose in poses {
-        if !pose.iter().all(|v| v.is_finite()) {
+        let Some(parts) = geometry.parts(pose) else {
             continue;
-        }
-        for j in 0..3 {
-            let c = rot * Vector3::new(pose[3 * j], pose[3 * j + 1], pose[3 * j + 2]) + t;
+        };
+        let (c, a) = (parts.hand_centre, parts.hand_axes[0]);
+        let joints = [0, 1, 2].map(|j| Vector3::new(pose[3 * j], pose[3 * j + 1], pose[3 * j + 2]));
+        for x in joints.into_iter().chain([c - a, c + a]) {
+            let c = rot * x + t;
             if c.z <= NEAR_PLANE + rho {
                 return full;
             }
