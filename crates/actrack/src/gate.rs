@@ -34,6 +34,8 @@ pub struct ForegroundGate {
     covered: Vec<u8>,
     /// The rectangle of `covered`'s set pixels.
     set: PixelRect,
+    /// The frame size `covered` was made for.
+    covered_size: (u32, u32),
     dilate: DilateScratch,
     mask: Vec<u8>,
 }
@@ -147,8 +149,8 @@ impl ForegroundGate {
                 self.grey.extend_from_slice(&self.row);
             }
         }
-        // Only the pixels the last frame covered need clearing.
-        if self.covered.len() == n {
+        // Only the pixels the last frame covered need clearing, when it was of this size.
+        if self.covered_size == (w, h) && self.covered.len() == n {
             let c = self.set;
             for y in c.y0 as usize..c.y1 as usize {
                 self.covered[y * w as usize + c.x0 as usize..y * w as usize + c.x1 as usize]
@@ -157,6 +159,7 @@ impl ForegroundGate {
         } else {
             self.covered.clear();
             self.covered.resize(n, 0);
+            self.covered_size = (w, h);
         }
         self.set = PixelRect::default();
         for pose in tracked {
@@ -296,6 +299,41 @@ mod tests {
             )
             .is_err()
         );
+    }
+
+    /// A frame of another shape with as many pixels is blended without a panic: the covered
+    /// mask is made again for its size rather than cleared where the last frame set it.
+    #[test]
+    fn a_frame_of_another_shape_remakes_the_covered_mask() {
+        let cfg = GateConfig::default();
+        let cam = |w: u32, h: u32| {
+            Camera::look_at(
+                nalgebra::Vector3::new(0.0, -2.0, 1.0),
+                nalgebra::Vector3::new(0.0, 0.3, 0.9),
+                nalgebra::Vector3::z(),
+                w,
+                h,
+                1.2,
+            )
+            .unwrap()
+        };
+        let pose = [0.2, 0.0, 1.2, 0.25, 0.1, 0.93, 0.2, 0.52, 0.9];
+        let geom = ArmGeometry::default();
+        let mut gate = ForegroundGate::default();
+        for (w, h) in [(16u32, 64u32), (64, 16)] {
+            let frame = vec![80u8; (w * h * 3) as usize];
+            let view = ImageView::rgb8(&frame, w, h).unwrap();
+            gate.update(
+                &cfg,
+                view,
+                PixelRect::full(w, h),
+                &cam(w, h),
+                &geom,
+                &[&pose],
+            )
+            .unwrap();
+            assert!(gate.covered.iter().any(|&c| c == 1), "{w}×{h}");
+        }
     }
 
     #[test]

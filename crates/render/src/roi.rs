@@ -111,8 +111,9 @@ const SIDE_SAMPLES: usize = 16;
 /// half-axis of that axis; the cones lie within their radii of p–q and q–r). Perspective maps
 /// the hull into the convex hull of the projected vertices, and a ball of radius ρ at depth
 /// z ≥ z_min, seen at most tan α off the axis, projects within
-/// ρ(1 + tan²α) / (√(z_min² − ρ²) − ρ tan α) of its centre (normalised units). With lens distortion the normalised rectangle's sides are sampled and
-/// distorted, which bounds it for the monotonic distortions of calibrated lenses.
+/// ρ(1 + tan²α) / (√(z_min² − ρ²) − ρ tan α) of its centre (normalised units). With lens
+/// distortion the normalised rectangle's sides are sampled and distorted, which bounds it for
+/// the monotonic distortions of calibrated lenses.
 pub fn arm_bounds(
     camera: &Camera,
     geometry: &ArmGeometry,
