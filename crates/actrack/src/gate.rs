@@ -332,7 +332,7 @@ mod tests {
                 &[&pose],
             )
             .unwrap();
-            assert!(gate.covered.iter().any(|&c| c == 1), "{w}×{h}");
+            assert!(gate.covered.contains(&1), "{w}×{h}");
         }
     }
 
