@@ -955,7 +955,7 @@ impl Threshold {
 pub fn grey_image(frame: ImageView<'_>, out: &mut Vec<f32>) {
     let (w, h) = frame.size();
     let (w, h) = (w as usize, h as usize);
-    out.clear();
+    // Every value is written below: no clearing.
     out.resize(w * h, 0.0);
     if let ImageView::Rgb8 { data, .. } = frame {
         pulp::Arch::new().dispatch(GreyRgb {

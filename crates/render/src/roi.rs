@@ -292,8 +292,15 @@ pub fn paste(
     let w = width as usize;
     let mut data = if (out.width(), out.height()) == (width, height) {
         let mut d = std::mem::take(out).into_data();
-        for y in clear.y0 as usize..clear.y1 as usize {
-            d[y * w + clear.x0 as usize..y * w + clear.x1 as usize].fill(0.0);
+        // The pixels of `clear` that `keep` does not overwrite below.
+        for y in clear.y0..clear.y1 {
+            let row = &mut d[y as usize * w..(y as usize + 1) * w];
+            if (keep.y0..keep.y1).contains(&y) && !keep.is_empty() {
+                row[clear.x0 as usize..clear.x1.min(keep.x0).max(clear.x0) as usize].fill(0.0);
+                row[clear.x0.max(keep.x1).min(clear.x1) as usize..clear.x1 as usize].fill(0.0);
+            } else {
+                row[clear.x0 as usize..clear.x1 as usize].fill(0.0);
+            }
         }
         d
     } else {
@@ -486,5 +493,37 @@ mod tests {
         want[10 + 2] = 5.0;
         assert_eq!(out.data(), &want[..]);
         assert!(paste(&part, rect, PixelRect::full(5, 4), rect, (5, 4), &mut out).is_err());
+        // Every placement of the cleared rectangle against the kept one: the cleared pixels are
+        // 0 unless kept, the kept ones the part's, the rest untouched.
+        let r = |x0, y0, x1, y1| PixelRect { x0, y0, x1, y1 };
+        let from = r(1, 1, 5, 4);
+        let part = EdgeImage::from_vec(4, 3, (1..=12).map(|v| v as f32).collect()).unwrap();
+        for keep in [r(1, 1, 5, 4), r(2, 1, 4, 3), r(3, 2, 4, 3)] {
+            for clear in [
+                r(0, 0, 6, 5),
+                r(0, 0, 3, 2),
+                r(4, 3, 6, 5),
+                r(2, 0, 3, 5),
+                r(0, 0, 0, 0),
+            ] {
+                let mut out = EdgeImage::constant(6, 5, 7.0).unwrap();
+                paste(&part, from, keep, clear, (6, 5), &mut out).unwrap();
+                for y in 0..5u32 {
+                    for x in 0..6u32 {
+                        let inside =
+                            |q: PixelRect| (q.x0..q.x1).contains(&x) && (q.y0..q.y1).contains(&y);
+                        let want = if inside(keep) {
+                            ((y - 1) * 4 + (x - 1) + 1) as f32
+                        } else if inside(clear) {
+                            0.0
+                        } else {
+                            7.0
+                        };
+                        let got = out.data()[(y * 6 + x) as usize];
+                        assert_eq!(got, want, "({x}, {y}) keep {keep:?} clear {clear:?}");
+                    }
+                }
+            }
+        }
     }
 }

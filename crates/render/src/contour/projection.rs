@@ -317,9 +317,21 @@ pub fn cover_parts(
             |u: usize, v: usize| p.signed_distance(Vector2::new(u as f64, v as f64)) - grow;
         let skip = |e: f64| (e / lip * (1.0 - 1e-9)).ceil().max(1.0) as usize;
         let (u0, u1) = (lo(b[0]), u1 as usize);
+        // The runs of the last two rows. The part and its bounding box are convex, so a run's
+        // first pixel is a convex function of the row and its last a concave one, up to the
+        // rounding to pixels (1 px each): a row's run starts at or after 2a₁ − a₂ − 2 and ends
+        // at or before 2z₁ − z₂ + 2, where the searches begin.
+        let mut last: [Option<(usize, usize)>; 2] = [None, None];
         for v in lo(b[1])..=v1 as usize {
             let row = &mut mask[v * w..(v + 1) * w];
-            let mut a = u0;
+            let (from, to) = match last {
+                [Some((a1, z1)), Some((a2, z2))] => (
+                    (2 * a1).saturating_sub(a2 + 2).max(u0),
+                    (2 * z1 + 2).saturating_sub(z2).min(u1),
+                ),
+                _ => (u0, u1),
+            };
+            let mut a = from;
             while a <= u1 {
                 let e = excess(a, v);
                 if e <= 0.0 {
@@ -328,9 +340,10 @@ pub fn cover_parts(
                 a = a.saturating_add(skip(e));
             }
             if a > u1 {
+                last = [None, None];
                 continue;
             }
-            let mut z = u1;
+            let mut z = to.max(a);
             while z > a {
                 let e = excess(z, v);
                 if e <= 0.0 {
@@ -339,6 +352,7 @@ pub fn cover_parts(
                 z = z.saturating_sub(skip(e)).max(a);
             }
             row[a..=z].fill(1);
+            last = [Some((a, z)), last[0]];
             #[allow(clippy::cast_possible_truncation)] // within the image's u32 size
             let run = PixelRect {
                 x0: a as u32,
