@@ -86,9 +86,7 @@ impl ForegroundGate {
         let fg = self.foreground.chunks_exact_mut(rw as usize);
         for ((y, grey), fg) in (rect.y0 as usize..).zip(rows).zip(fg) {
             let back = &self.background[y * w as usize + x0..y * w as usize + x1];
-            for ((f, &i), &b) in fg.iter_mut().zip(grey).zip(back) {
-                *f = u8::from((i - b).abs() > cfg.threshold);
-            }
+            actrack_render::foreground_mask(grey, back, cfg.threshold, fg);
         }
         actrack_render::dilate_mask(
             &self.foreground,
@@ -101,9 +99,7 @@ impl ForegroundGate {
         // The factor floor + (1 − floor)·m for m = 1 and m = 0.
         let (on, off) = (cfg.floor + (1.0 - cfg.floor), cfg.floor);
         let mut data = std::mem::take(g).into_data();
-        for (d, &m) in data.iter_mut().zip(&self.mask) {
-            *d *= if m != 0 { on } else { off };
-        }
+        actrack_render::scale_by_mask(&mut data, &self.mask, on, off);
         *g = EdgeImage::from_vec(rw, rh, data)
             .map_err(|e| Error::Config(format!("foreground gate: {e}")))?;
         Ok(())

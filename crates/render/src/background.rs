@@ -110,6 +110,65 @@ pub fn blend_grey(background: &mut [f32], grey: &[f32], covered: &[u8], rate: f3
     });
 }
 
+/// The pixels that differ from the background: `out[i] = 1` where |grey[i] − background[i]| >
+/// `threshold`, else 0 (equal lengths; the shortest decides). Compiled for the best
+/// instruction set the CPU has.
+pub fn foreground_mask(grey: &[f32], background: &[f32], threshold: f32, out: &mut [u8]) {
+    struct Op<'a> {
+        grey: &'a [f32],
+        background: &'a [f32],
+        threshold: f32,
+        out: &'a mut [u8],
+    }
+    impl pulp::WithSimd for Op<'_> {
+        type Output = ();
+
+        // Inlined into the dispatched function.
+        #[allow(clippy::inline_always)]
+        #[inline(always)]
+        fn with_simd<S: pulp::Simd>(self, _simd: S) {
+            for ((o, &i), &b) in self.out.iter_mut().zip(self.grey).zip(self.background) {
+                *o = u8::from((i - b).abs() > self.threshold);
+            }
+        }
+    }
+    pulp::Arch::new().dispatch(Op {
+        grey,
+        background,
+        threshold,
+        out,
+    });
+}
+
+/// Scales each value by `on` where `mask` is non-zero and by `off` elsewhere (equal lengths;
+/// the shortest decides). Compiled for the best instruction set the CPU has.
+pub fn scale_by_mask(values: &mut [f32], mask: &[u8], on: f32, off: f32) {
+    struct Op<'a> {
+        values: &'a mut [f32],
+        mask: &'a [u8],
+        on: f32,
+        off: f32,
+    }
+    impl pulp::WithSimd for Op<'_> {
+        type Output = ();
+
+        // Inlined into the dispatched function.
+        #[allow(clippy::inline_always)]
+        #[inline(always)]
+        fn with_simd<S: pulp::Simd>(self, _simd: S) {
+            for (v, &m) in self.values.iter_mut().zip(self.mask) {
+                *v *= if m != 0 { self.on } else { self.off };
+            }
+        }
+    }
+    pulp::Arch::new().dispatch(Op {
+        values,
+        mask,
+        on,
+        off,
+    });
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -149,5 +208,27 @@ mod tests {
             assert_eq!(bits(&two), bits(&want));
             assert!(blend_background(&mut fused[1..], view, &covered, 0.1).is_err());
         }
+    }
+
+    /// The mask and the scaling give what the plain per-pixel expressions give.
+    #[test]
+    fn foreground_mask_and_scaling_are_the_per_pixel_expressions() {
+        let grey: Vec<f32> = (0..67).map(|i| (i * 37 % 101) as f32).collect();
+        let back: Vec<f32> = (0..67).map(|i| (i * 53 % 97) as f32 + 0.5).collect();
+        let mut mask = vec![7u8; 67];
+        foreground_mask(&grey, &back, 10.0, &mut mask);
+        for ((&m, &i), &b) in mask.iter().zip(&grey).zip(&back) {
+            assert_eq!(m, u8::from((i - b).abs() > 10.0));
+        }
+        assert!(mask.contains(&0) && mask.contains(&1));
+        let mut values: Vec<f32> = (0..67).map(|i| i as f32 / 67.0).collect();
+        let want: Vec<f32> = values
+            .iter()
+            .zip(&mask)
+            .map(|(&v, &m)| v * if m != 0 { 1.0 } else { 0.1 })
+            .collect();
+        scale_by_mask(&mut values, &mask, 1.0, 0.1);
+        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&values), bits(&want));
     }
 }
