@@ -270,9 +270,9 @@ pub(crate) fn part_polygon(part: &Part2, out: &mut Vec<[f64; 2]>) {
 /// within `grow` pixels of it: the union silhouette grown by `grow` (exact for discs and
 /// capsules; an ellipse's inside is exact and its growth is `grow` along its b axis and a/b
 /// times that along its a axis, within its bounding box grown by `grow`). Other pixels are
-/// left as they are. A
-/// non-finite part or `grow` covers nothing. Returns the smallest rectangle that holds every
-/// pixel it set (empty when it set none), so that a caller can clear just that.
+/// left as they are. A non-finite part or `grow` covers nothing. Returns the smallest
+/// rectangle that holds every pixel it set (empty when it set none), so that a caller can clear
+/// just that.
 ///
 /// # Errors
 /// [`RenderError::InvalidImage`] if `mask` does not hold `width · height` values.
