@@ -110,8 +110,8 @@ pub fn blend_grey(background: &mut [f32], grey: &[f32], covered: &[u8], rate: f3
     });
 }
 
-/// The pixels that differ from the background: `out[i] = 1` where |grey[i] − background[i]| >
-/// `threshold`, else 0 (equal lengths; the shortest decides). Compiled for the best
+/// The pixels that differ from the background: `out[i] = 1` where
+/// `|grey[i] − background[i]| > threshold`, else 0 (equal lengths; the shortest decides). Compiled for the best
 /// instruction set the CPU has.
 pub fn foreground_mask(grey: &[f32], background: &[f32], threshold: f32, out: &mut [u8]) {
     struct Op<'a> {
