@@ -173,12 +173,17 @@ impl ForegroundGate {
         if rw > 0 {
             for (y, grey) in (rect.y0 as usize..).zip(self.grey.chunks_exact(rw)) {
                 let at = y * w + x0..y * w + x1;
-                actrack_render::blend_grey(
+                // The grey values are finite, so the f32 view passes them as they are.
+                #[allow(clippy::cast_possible_truncation)] // the region's width
+                let grey = ImageView::grey_f32(grey, rw as u32, 1)
+                    .map_err(|e| Error::Config(format!("foreground gate: {e}")))?;
+                actrack_render::blend_background(
                     &mut self.background[at.clone()],
                     grey,
                     &self.covered[at],
                     cfg.rate,
-                );
+                )
+                .map_err(|e| Error::Config(format!("foreground gate: {e}")))?;
             }
         }
         if rect == PixelRect::full(w as u32, h) {

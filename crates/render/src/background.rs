@@ -79,37 +79,6 @@ impl pulp::WithSimd for Blend<'_> {
     }
 }
 
-/// B ← B + rate · (I − B) wherever `covered` is 0, for grey values `grey` computed already
-/// (equal lengths; the shortest decides). As [`blend_background`], compiled for the best
-/// instruction set.
-pub fn blend_grey(background: &mut [f32], grey: &[f32], covered: &[u8], rate: f32) {
-    struct Op<'a> {
-        background: &'a mut [f32],
-        grey: &'a [f32],
-        covered: &'a [u8],
-        rate: f32,
-    }
-    impl pulp::WithSimd for Op<'_> {
-        type Output = ();
-
-        // Inlined into the dispatched function.
-        #[allow(clippy::inline_always)]
-        #[inline(always)]
-        fn with_simd<S: pulp::Simd>(self, _simd: S) {
-            let rate = self.rate;
-            for ((b, &g), &c) in self.background.iter_mut().zip(self.grey).zip(self.covered) {
-                *b += rate * (g - *b) * f32::from(u8::from(c == 0));
-            }
-        }
-    }
-    pulp::Arch::new().dispatch(Op {
-        background,
-        grey,
-        covered,
-        rate,
-    });
-}
-
 /// The pixels that differ from the background: `out[i] = 1` where
 /// `|grey[i] − background[i]| > threshold`, else 0 (equal lengths; the shortest decides). Compiled for the best
 /// instruction set the CPU has.
@@ -202,7 +171,8 @@ mod tests {
                 }
             }
             let mut two = start.clone();
-            blend_grey(&mut two, &grey, &covered, 0.1);
+            let grey_view = ImageView::grey_f32(&grey, w, h).unwrap();
+            blend_background(&mut two, grey_view, &covered, 0.1).unwrap();
             let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
             assert_eq!(bits(&fused), bits(&want));
             assert_eq!(bits(&two), bits(&want));

@@ -71,7 +71,7 @@ mod silhouette;
 pub mod synth;
 
 pub use arm::{ArmGeometry, ArmParts, correct_arm};
-pub use background::{blend_background, blend_grey, foreground_mask, scale_by_mask};
+pub use background::{blend_background, foreground_mask, scale_by_mask};
 pub use camera::{Camera, NEAR_PLANE};
 pub use contour::{
     ContourMethod, Part2, RenderScratch, contour_points, cover_parts, project_parts,
