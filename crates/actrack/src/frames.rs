@@ -596,7 +596,11 @@ pub struct Y4mReader {
     frames_read: usize,
     buf: Vec<u8>,
     /// The conversion's tables, made at the first frame.
-    tables: Option<Box<YuvTables>>,
+    tables: Option<Box<Ycc>>,
+    /// Every pixel's chroma terms (R, G, B) of one row ([`ChromaTerms`]).
+    terms: [Vec<u32>; 3],
+    /// One row of R, G and B, before they are interleaved.
+    planes: [Vec<u8>; 3],
 }
 
 impl Y4mReader {
@@ -682,6 +686,8 @@ impl Y4mReader {
             frames_read: 0,
             buf: Vec::new(),
             tables: None,
+            terms: Default::default(),
+            planes: Default::default(),
         })
     }
 
@@ -731,110 +737,276 @@ impl Y4mReader {
 
     fn convert_frame(&mut self) -> RgbImage {
         let (w, h) = (self.width, self.height);
-        let (ysz, cw, ch) = self.plane_sizes();
-        let t = self
-            .tables
-            .get_or_insert_with(|| Box::new(YuvTables::new(self.full_range)));
-        let (yp, rest) = self.buf.split_at(ysz);
-        let (up, vp) = rest.split_at(cw * ch);
+        let (ysz, cw, _) = self.plane_sizes();
+        let full = self.full_range;
+        let ycc = self.tables.get_or_insert_with(|| Box::new(Ycc::new(full)));
         let mut data = vec![0u8; 3 * w * h];
-        for (y, (out, yrow)) in data
+        let (luma, chroma) = self.buf.split_at(ysz);
+        pulp::Arch::new().dispatch(ConvertOp {
+            ycc,
+            chroma: self.chroma,
+            full_range: full,
+            luma,
+            chroma_planes: chroma.split_at(chroma.len() / 2),
+            chroma_width: cw,
+            terms: &mut self.terms,
+            planes: &mut self.planes,
+            out: &mut data,
+            width: w,
+        });
+        // The buffer holds exactly w·h pixels.
+        RgbImage::from_raw(w as u32, h as u32, data).unwrap_or_default()
+    }
+}
+
+/// The conversion of one frame's planes into RGB rows, as a [`pulp::WithSimd`] operation: its
+/// loops are compiled for AVX-512 and AVX2 as well as the baseline, and the variant the CPU
+/// supports runs.
+struct ConvertOp<'a> {
+    ycc: &'a Ycc,
+    chroma: Chroma,
+    full_range: bool,
+    luma: &'a [u8],
+    /// The Cb and Cr planes.
+    chroma_planes: (&'a [u8], &'a [u8]),
+    chroma_width: usize,
+    terms: &'a mut [Vec<u32>; 3],
+    planes: &'a mut [Vec<u8>; 3],
+    out: &'a mut [u8],
+    width: usize,
+}
+
+impl pulp::WithSimd for ConvertOp<'_> {
+    type Output = ();
+
+    // Inlined into the dispatched function.
+    #[allow(clippy::inline_always)]
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) {
+        let (w, cw, t) = (self.width, self.chroma_width, self.ycc);
+        let (up, vp) = self.chroma_planes;
+        let shift = usize::from(matches!(self.chroma, Chroma::C420 | Chroma::C422));
+        for k in self.terms.iter_mut() {
+            k.resize(w, 0);
+        }
+        // Every pixel's chroma terms for the chroma row last expanded (4:2:0 shares one
+        // between two rows).
+        let mut terms_row = usize::MAX;
+        for (y, (out, yrow)) in self
+            .out
             .chunks_exact_mut(3 * w)
-            .zip(yp.chunks_exact(w))
+            .zip(self.luma.chunks_exact(w))
             .enumerate()
         {
             let crow = match self.chroma {
                 Chroma::Mono => {
                     for (px, &yv) in out.chunks_exact_mut(3).zip(yrow) {
-                        px.fill(t.mono[usize::from(yv)]);
+                        px.fill(t.grey(yv));
                     }
                     continue;
                 }
                 Chroma::C444 | Chroma::C422 => y,
                 Chroma::C420 => y / 2,
             };
-            let urow = &up[crow * cw..(crow + 1) * cw];
-            let vrow = &vp[crow * cw..(crow + 1) * cw];
-            let shift = usize::from(self.chroma != Chroma::C444);
-            for (x, (px, &yv)) in out.chunks_exact_mut(3).zip(yrow).enumerate() {
-                let (u, v) = (usize::from(urow[x >> shift]), usize::from(vrow[x >> shift]));
-                let yi = usize::from(yv) << 8;
-                px[0] = t.r[yi | v];
-                px[1] = round_byte(t.luma[yi >> 8] - t.g_cb[u] - t.g_cr[v]);
-                px[2] = t.b[yi | u];
+            if crow != terms_row {
+                let urow = &up[crow * cw..(crow + 1) * cw];
+                let vrow = &vp[crow * cw..(crow + 1) * cw];
+                if shift == 1 {
+                    expand_terms::<2>(t, urow, vrow, self.terms);
+                } else {
+                    expand_terms::<1>(t, urow, vrow, self.terms);
+                }
+                terms_row = crow;
+            }
+            if self.full_range {
+                convert_row::<1>(yrow, self.terms, self.planes, out);
+            } else {
+                convert_row::<219>(yrow, self.terms, self.planes, out);
             }
         }
-        // The buffer holds exactly w·h pixels.
-        RgbImage::from_raw(w as u32, h as u32, data).unwrap_or_default()
     }
 }
 
-/// The YCbCr → RGB conversion (BT.601, full or limited range) by tables, each entry computed
-/// as the per-pixel formula computes it: R = Y′ + 1.402·Cr, G = Y′ − 0.344136·Cb − 0.714136·Cr,
-/// B = Y′ + 1.772·Cb, rounded and clamped to bytes, with Y′, Cb, Cr the byte values rescaled
-/// (limited range: (Y − 16)·255/219, (C − 128)·255/224). R depends on (Y, Cr) and B on
-/// (Y, Cb) only, so they are read whole from 64 KiB tables; G from the terms of its bytes.
-struct YuvTables {
-    luma: [f64; 256],
-    g_cb: [f64; 256],
-    g_cr: [f64; 256],
-    /// R of (Y, Cr) at `Y·256 + Cr`.
-    r: Vec<u8>,
-    /// B of (Y, Cb) at `Y·256 + Cb`.
-    b: Vec<u8>,
-    /// The grey of a mono stream.
+/// Every pixel's chroma terms in `terms` (R, G, B) from one row of chroma samples, each of
+/// which covers `N` pixels of the row.
+// Inlined into the dispatched `ConvertOp`.
+#[allow(clippy::inline_always)]
+#[inline(always)]
+fn expand_terms<const N: usize>(t: &Ycc, urow: &[u8], vrow: &[u8], terms: &mut [Vec<u32>; 3]) {
+    let [kr, kg, kb] = terms;
+    let w = kr.len();
+    // Whole samples first, then the last pixel of an odd row.
+    let whole = w / N;
+    for ((((r, g), b), &u), &v) in kr[..whole * N]
+        .chunks_exact_mut(N)
+        .zip(kg[..whole * N].chunks_exact_mut(N))
+        .zip(kb[..whole * N].chunks_exact_mut(N))
+        .zip(urow)
+        .zip(vrow)
+    {
+        let k = t.chroma(u, v);
+        r.copy_from_slice(&[k.r; N]);
+        g.copy_from_slice(&[k.g; N]);
+        b.copy_from_slice(&[k.b; N]);
+    }
+    if whole * N < w {
+        let k = t.chroma(urow[whole], vrow[whole]);
+        kr[whole * N..].fill(k.r);
+        kg[whole * N..].fill(k.g);
+        kb[whole * N..].fill(k.b);
+    }
+}
+
+/// The offset that makes every sum q + K of the conversion non-negative, in units of D.
+const BIAS_UNITS: u32 = 1024;
+
+/// Converts one row of pixels with every pixel's chroma terms ([`Ycc::chroma`]) in `terms`
+/// (R, G, B); `D` is the conversion's luma scale: 1 (full range) or 219 (limited range). Each
+/// channel is computed into its own plane (`planes`, scratch) by a loop the compiler
+/// vectorises (no lookups, no branches), then the planes are interleaved.
+// Inlined into the dispatched `ConvertOp`.
+#[allow(clippy::inline_always)]
+#[inline(always)]
+fn convert_row<const D: u32>(
+    yrow: &[u8],
+    terms: &[Vec<u32>; 3],
+    planes: &mut [Vec<u8>; 3],
+    out: &mut [u8],
+) {
+    // q + 255·16 = 255·Y (D = 219; the terms hold the −255·16) or q = Y (D = 1).
+    let m = if D == 1 { 1 } else { 255 };
+    for (plane, k) in planes.iter_mut().zip(terms) {
+        plane.resize(yrow.len(), 0);
+        for ((o, &yv), &k) in plane.iter_mut().zip(yrow).zip(k) {
+            // ⌊(q + K)/D⌋ + BIAS_UNITS, an unsigned division by a constant.
+            let v = ((u32::from(yv) * m + k) / D).clamp(BIAS_UNITS, BIAS_UNITS + 255);
+            #[allow(clippy::cast_possible_truncation)]
+            let byte = (v - BIAS_UNITS) as u8;
+            *o = byte;
+        }
+    }
+    let [r, g, b] = planes;
+    for (((px, &r), &g), &b) in out.chunks_exact_mut(3).zip(&*r).zip(&*g).zip(&*b) {
+        px.copy_from_slice(&[r, g, b]);
+    }
+}
+
+/// The chroma terms of one chroma sample (Cb, Cr): K of R, G and B in [`Ycc`], plus
+/// [`BIAS_UNITS`]·D and minus q's offset (255·16 in limited range), so that a pixel's sum is
+/// non-negative and its q is a multiple of Y.
+#[derive(Clone, Copy, Debug, Default)]
+struct ChromaTerms {
+    r: u32,
+    g: u32,
+    b: u32,
+}
+
+/// The YCbCr → RGB conversion of BT.601, full or limited range, exactly in integers:
+/// R = Y′ + 1.402·Cr, G = Y′ − 0.344136·Cb − 0.714136·Cr, B = Y′ + 1.772·Cb, each rounded half
+/// away from zero and clamped to a byte, where Y′ = Y and Cb, Cr = byte − 128 (full range), or
+/// Y′ = (Y − 16)·255/219 and C = (byte − 128)·255/224 (limited range).
+///
+/// With Y′ = q/D for an integer q and a channel's chroma part c, the rounded value is
+/// ⌊q/D + c + ½⌋ = ⌊(q + K)/D⌋ for the integer K = ⌊D·(c + ½)⌋ (⌊(n + x)/D⌋ = ⌊(n + ⌊x⌋)/D⌋
+/// for integers n and D > 0). Rounding halves up rather than away from zero differs only below
+/// zero, where both clamp to 0. K is found once per chroma sample from tables of the bytes;
+/// each pixel adds its q and divides by the constant D.
+///
+/// The tables hold K with the bias of [`ChromaTerms`], so sums are unsigned (two's complement
+/// wraps back to the non-negative result).
+struct Ycc {
+    /// K of R by the Cr byte.
+    r_cr: [u32; 256],
+    /// K of B by the Cb byte.
+    b_cb: [u32; 256],
+    /// G's K is ⌊(A(Cb) + B(Cr))/den⌋ for integers A and B, which are held divided by den:
+    /// (quotient, remainder) of A (½ and the bias included) and of B.
+    g_cb: [(u32, i32); 256],
+    g_cr: [(u32, i32); 256],
+    /// The denominator of A and B.
+    den: i32,
+    /// The grey byte of a mono stream: round(Y′), clamped.
     mono: [u8; 256],
 }
 
-impl YuvTables {
+/// BT.601's coefficients have six decimals: integers over this scale.
+const COEF_SCALE: i64 = 1_000_000;
+
+impl Ycc {
     fn new(full_range: bool) -> Self {
-        let mut luma = [0.0; 256];
-        let (mut r_cr, mut g_cb, mut g_cr, mut b_cb) =
-            ([0.0; 256], [0.0; 256], [0.0; 256], [0.0; 256]);
-        for i in 0..256 {
-            let v = f64::from(i as u8);
-            let (yy, c) = if full_range {
-                (v, v - 128.0)
-            } else {
-                ((v - 16.0) * 255.0 / 219.0, (v - 128.0) * 255.0 / 224.0)
-            };
-            luma[i] = yy;
-            r_cr[i] = 1.402 * c;
-            g_cb[i] = 0.344_136 * c;
-            g_cr[i] = 0.714_136 * c;
-            b_cb[i] = 1.772 * c;
-        }
-        let pairs = |term: &[f64; 256]| -> Vec<u8> {
-            (0..256 * 256)
-                .map(|i| round_byte(luma[i >> 8] + term[i & 255]))
-                .collect()
+        // Y′ = q/D and C = (byte − 128)·m/f.
+        let (d, m, f): (i64, i64, i64) = if full_range {
+            (1, 1, 1)
+        } else {
+            (219, 255, 224)
         };
-        Self {
-            r: pairs(&r_cr),
-            b: pairs(&b_cb),
-            mono: luma.map(round_byte),
-            luma,
-            g_cb,
-            g_cr,
+        // D·(c + ½) for c = coef·C is the numerator half + coef·SCALE·D·(byte − 128)·m over
+        // den = f·SCALE.
+        let den = f * COEF_SCALE;
+        let half = d * den / 2;
+        let bias = i64::from(BIAS_UNITS) * d - if full_range { 0 } else { 16 * 255 };
+        // Every value below fits: |K| < 2¹⁶ and the bias < 2¹⁸.
+        #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+        let word = |x: i64| x as u32;
+        #[allow(clippy::cast_possible_truncation)]
+        let rem = |x: i64| x.rem_euclid(den) as i32;
+        let mut t = Self {
+            r_cr: [0; 256],
+            b_cb: [0; 256],
+            g_cb: [(0, 0); 256],
+            g_cr: [(0, 0); 256],
+            #[allow(clippy::cast_possible_truncation)]
+            den: den as i32,
+            mono: [0; 256],
+        };
+        for i in 0..256 {
+            let byte = i as i64;
+            let q = if full_range { byte } else { (byte - 16) * 255 };
+            let dc = d * (byte - 128) * m;
+            let (g_cb, g_cr) = (half - 344_136 * dc, -714_136 * dc);
+            t.r_cr[i] = word((half + 1_402_000 * dc).div_euclid(den) + bias);
+            t.b_cb[i] = word((half + 1_772_000 * dc).div_euclid(den) + bias);
+            t.g_cb[i] = (word(g_cb.div_euclid(den) + bias), rem(g_cb));
+            t.g_cr[i] = (word(g_cr.div_euclid(den)), rem(g_cr));
+            #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+            let grey = (q + d / 2).div_euclid(d).clamp(0, 255) as u8;
+            t.mono[i] = grey;
+        }
+        t
+    }
+
+    /// The K of R, G and B for one chroma sample.
+    #[inline]
+    fn chroma(&self, u: u8, v: u8) -> ChromaTerms {
+        let (a1, a0) = self.g_cb[usize::from(u)];
+        let (b1, b0) = self.g_cr[usize::from(v)];
+        ChromaTerms {
+            r: self.r_cr[usize::from(v)],
+            g: a1
+                .wrapping_add(b1)
+                .wrapping_add(u32::from(a0 + b0 >= self.den)),
+            b: self.b_cb[usize::from(u)],
         }
     }
-}
 
-/// `x.round().clamp(0.0, 255.0) as u8` (halves away from zero, NaN → 0) without a call into
-/// libm: x86-64's baseline has no rounding instruction, and the call costs more than the rest
-/// of a pixel's conversion.
-fn round_byte(x: f64) -> u8 {
-    let c = x.clamp(-1.0, 256.0);
-    // Truncation towards zero; NaN becomes 0.
-    #[allow(clippy::cast_possible_truncation)]
-    let t = c as i64;
-    // Exact: c and t differ by less than 1.
-    let f = c - t as f64;
-    // Flags, not branches: the fraction is as good as random, a branch would mispredict.
-    let r = t + i64::from(f >= 0.5) - i64::from(f <= -0.5);
-    #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
-    let b = r.clamp(0, 255) as u8;
-    b
+    fn grey(&self, y: u8) -> u8 {
+        self.mono[usize::from(y)]
+    }
+
+    /// One pixel (for tests; frames go through [`convert_row`]).
+    #[cfg(test)]
+    fn pixel(&self, y: u8, u: u8, v: u8, full_range: bool) -> [u8; 3] {
+        let mut px = [0u8; 3];
+        let k = self.chroma(u, v);
+        let terms = [vec![k.r], vec![k.g], vec![k.b]];
+        let mut planes = Default::default();
+        if full_range {
+            convert_row::<1>(&[y], &terms, &mut planes, &mut px);
+        } else {
+            convert_row::<219>(&[y], &terms, &mut planes, &mut px);
+        }
+        px
+    }
 }
 
 /// Writes frames as a YUV4MPEG2 stream: `Cmono` when every frame is grey (lossless), else full-range
@@ -1056,51 +1228,52 @@ mod tests {
         assert!(r.read_frame().unwrap().is_none());
     }
 
-    #[test]
-    fn round_byte_is_round_and_clamp() {
-        let mut xs = vec![
-            f64::NAN,
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-            -0.5,
-            0.5,
-            254.5,
-            255.5,
-        ];
-        xs.extend((-40_000..300_000).map(|i| f64::from(i) / 1000.0));
-        xs.extend([
-            0.499_999_999_999_999_94,
-            1.499_999_999_999_999_8,
-            -0.499_999_999_999_999_94,
-        ]);
-        for x in xs {
-            #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
-            let want = x.round().clamp(0.0, 255.0) as u8;
-            assert_eq!(round_byte(x), want, "{x}");
-        }
-    }
-
-    /// The per-pixel formula the tables replace.
+    /// BT.601 in exact rational arithmetic: each channel's value as a fraction, rounded half
+    /// away from zero and clamped (`mono`: Y′ alone).
     fn reference_rgb(yv: u8, u: u8, v: u8, full: bool, mono: bool) -> [u8; 3] {
-        let (yy, cb, cr) = if full {
-            (f64::from(yv), f64::from(u) - 128.0, f64::from(v) - 128.0)
+        let (y, cb, cr) = (i128::from(yv), i128::from(u) - 128, i128::from(v) - 128);
+        // Y′·den and C·den/10⁶ over the common denominator den.
+        let (luma, chroma, den) = if full {
+            (y * 1_000_000, 1, 1_000_000)
         } else {
             (
-                (f64::from(yv) - 16.0) * 255.0 / 219.0,
-                (f64::from(u) - 128.0) * 255.0 / 224.0,
-                (f64::from(v) - 128.0) * 255.0 / 224.0,
+                (y - 16) * 255 * 224 * 1_000_000,
+                255 * 219,
+                219 * 224 * 1_000_000,
             )
         };
-        #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
-        let c = |x: f64| x.round().clamp(0.0, 255.0) as u8;
+        let round = |n: i128| -> u8 {
+            let r = n.signum() * ((2 * n.abs() + den) / (2 * den));
+            u8::try_from(r.clamp(0, 255)).unwrap()
+        };
         if mono {
-            return [c(yy); 3];
+            return [round(luma); 3];
         }
         [
-            c(yy + 1.402 * cr),
-            c(yy - 0.344_136 * cb - 0.714_136 * cr),
-            c(yy + 1.772 * cb),
+            round(luma + 1_402_000 * chroma * cr),
+            round(luma - 344_136 * chroma * cb - 714_136 * chroma * cr),
+            round(luma + 1_772_000 * chroma * cb),
         ]
+    }
+
+    #[test]
+    fn ycc_conversion_is_exact_for_every_input() {
+        for full in [true, false] {
+            let t = Ycc::new(full);
+            for y in 0..=255u8 {
+                assert_eq!(t.grey(y), reference_rgb(y, 128, 128, full, true)[0]);
+                for u in 0..=255u8 {
+                    for v in 0..=255u8 {
+                        let got = t.pixel(y, u, v, full);
+                        let want = reference_rgb(y, u, v, full, false);
+                        assert_eq!(got, want, "full={full} Y={y} Cb={u} Cr={v}");
+                    }
+                }
+            }
+        }
+        // A tie, 93 − 0.5 exactly, that the f64 formula (Y − 0.344136·Cb) − 0.714136·Cr
+        // rounds down.
+        assert_eq!(Ycc::new(true).pixel(111, 78, 178, true)[1], 93);
     }
 
     #[test]
